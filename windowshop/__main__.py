@@ -1,0 +1,5 @@
+import sys
+
+from windowshop.cli import main
+
+sys.exit(main())

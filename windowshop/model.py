@@ -1,0 +1,95 @@
+"""The contract between a radiance model, the trainer and the renderers.
+
+A model is an `nn.Module` that turns rays into colours. The trainer, `eval`, `render`, the study
+and the service only use what is declared here, so every model (`nerf`, `fast`, ...) plugs into all
+of them. Models are registered by name in `MODELS` and rebuilt from their checkpoint's own config.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Where a model may sample, in the scene's normalised frame."""
+
+    aabb: tuple[tuple[float, float, float], tuple[float, float, float]]  # min corner, max corner
+    near: float
+    far: float
+
+    @classmethod
+    def of_scene(cls, scene) -> "Bounds":
+        lo, hi = np.asarray(scene.aabb, dtype=float)
+        return cls(aabb=(tuple(lo.tolist()), tuple(hi.tolist())), near=float(scene.near),
+                   far=float(scene.far))
+
+    def aabb_tensor(self, device: torch.device | str = "cpu") -> torch.Tensor:
+        """(2, 3) float32 tensor of the box."""
+        return torch.tensor(self.aabb, dtype=torch.float32, device=device)
+
+
+@dataclass
+class RenderOutput:
+    """What a model returns for R rays."""
+
+    rgb: torch.Tensor  # (R, 3) composited over the given background
+    depth: torch.Tensor  # (R,) expected distance along the (unit) ray
+    opacity: torch.Tensor  # (R,) accumulated alpha
+    aux: dict[str, torch.Tensor] = field(default_factory=dict)  # e.g. "rgb_coarse" (R, 3)
+    num_samples: int = 0  # samples evaluated for this batch (for samples/s figures)
+
+
+class RadianceModel(nn.Module):
+    """Base class of every model. Subclasses set `name` and implement `render_rays`."""
+
+    name: str = ""
+
+    def __init__(self, config: Any, bounds: Bounds):
+        super().__init__()
+        self.config = config
+        self.bounds = bounds
+
+    def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
+                    background: torch.Tensor) -> RenderOutput:
+        """Render rays `origins` (R, 3), unit `directions` (R, 3) over `background` (R, 3)."""
+        raise NotImplementedError
+
+    def loss(self, out: RenderOutput, target: torch.Tensor) -> torch.Tensor:
+        """Training loss against `target` (R, 3): MSE of the colour and of any auxiliary colour."""
+        loss = torch.mean((out.rgb - target) ** 2)
+        for key, value in out.aux.items():
+            if key.startswith("rgb_"):
+                loss = loss + torch.mean((value - target) ** 2)
+        return loss
+
+    def make_optimizer(self) -> torch.optim.Optimizer:
+        """The optimizer the trainer steps; its groups' `lr` are the initial learning rates."""
+        raise NotImplementedError
+
+    def lr_factor(self, progress: float) -> float:
+        """Multiplier of the initial learning rates at `progress` in [0, 1] of the budget."""
+        return 1.0
+
+    def before_step(self, step: int, progress: float) -> None:
+        """Hook called by the trainer before each optimisation step (occupancy updates, growth)."""
+
+
+MODELS = {
+    "nerf": "windowshop.field.nerf:NerfModel",
+    "fast": "windowshop.field.fast:FastModel",
+}
+
+
+def model_class(name: str) -> type[RadianceModel]:
+    """The class registered under `name`."""
+    if name not in MODELS:
+        raise ValueError(f"unknown model {name!r}; choose one of {', '.join(sorted(MODELS))}")
+    module, attr = MODELS[name].split(":")
+    return getattr(importlib.import_module(module), attr)

@@ -19,3 +19,107 @@ class SceneOptions:
     test_views: int | None = None  # keep K evenly spaced held-out views
     background: str = "white"  # for sources with alpha: "white", "black" or "alpha" (kept)
     normalize: bool = True  # centre, up = +z, object box scaled into [-1, 1]^3
+
+
+@dataclass(frozen=True)
+class NerfConfig:
+    """The NeRF of Mildenhall et al. 2020: encoding, MLP, samples per ray and learning rate.
+
+    `near`/`far` are in the scene's normalised units; None uses the scene's own interval (our scenes
+    are normalised, so the seed's "near 2, far 6 on lego" is whatever interval bounds the object).
+    """
+
+    freqs: int = 10  # L: frequencies of the position encoding (the identity is always included)
+    freqs_dir: int = 4  # L_dir: frequencies of the direction encoding
+    view_dependent: bool = True  # False: colour depends on position only
+    encoding_pi: bool = False  # True: sin(2^k pi p) as the paper's formula; False: sin(2^k p), its code
+    depth: int = 8  # D: layers of the trunk
+    width: int = 256  # W: their width
+    skip: int = 5  # the encoded input is concatenated again after this many layers (0: never)
+    n_coarse: int = 64  # N_c: stratified samples per ray
+    n_fine: int = 128  # N_f: inverse-CDF samples per ray for a separate fine network (0: one network)
+    near: float | None = None
+    far: float | None = None
+    lr: float = 5e-4  # Adam's initial learning rate ...
+    lr_final: float = 5e-5  # ... decayed exponentially to this at the end of the budget
+
+
+NERF_PRESETS = {
+    "paper": NerfConfig(),
+    "tiny": NerfConfig(freqs=6, view_dependent=False, n_coarse=64, n_fine=0),
+}
+
+
+@dataclass(frozen=True)
+class FastConfig:
+    """The fast grid model (windowshop.field.fast): a density grid and a feature grid over the
+    object's box, read by trilinear interpolation; a tiny MLP turns features and the view direction
+    into colour. Samples are marched only through occupied cells; the grids grow coarse to fine.
+    Sizes are in voxels of the box, so they mean the same for any scene."""
+
+    voxels: int = 128**3  # grid vertices at the end of the growth
+    voxels_start: int = 48**3  # ... and at the start
+    growth: tuple[float, ...] = (0.1, 0.2, 0.3)  # progress at which the grid grows (geometrically)
+    features: int = 12  # channels of the feature grid
+    hidden: int = 64  # width of the colour MLP's one hidden layer
+    sh_degree: int = 2  # spherical harmonics of the view direction fed to it (-1: no view dependence)
+    step: float = 0.5  # marching step, in voxels of the current grid
+    alpha_init: float = 1e-2  # opacity of one final-resolution step at initialisation
+    lr_grid: float = 0.1  # Adam on both grids ...
+    lr_mlp: float = 3e-3  # ... and on the MLP
+    lr_final: float = 0.1  # learning rates decay exponentially to this factor
+    occupancy_warmup: int = 64  # steps before empty cells are first skipped
+    occupancy_every: int = 16  # steps between refreshes of the occupancy grid
+    occupancy_alpha: float = 1e-3  # a cell is skipped when no corner reaches this opacity per step
+    weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
+    tv_density: float = 0.0  # total-variation weight on the density grid at the samples
+    tv_features: float = 0.0  # ... and on the feature grid
+
+
+FAST_PRESETS = {
+    "default": FastConfig(),
+}
+
+
+@dataclass(frozen=True)
+class PrepareOptions:
+    """Photos or a video -> a posed scene (`windowshop prepare`)."""
+
+    max_side: int | None = 640  # working resolution: the longer side in pixels (None: as given)
+    frames: int = 40  # frames sampled from a video
+    intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
+    matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
+    masks: bool = True  # foreground masks when the background is plain
+    overwrite: bool = False  # replace an earlier prepare's output folder
+    seed: int = 0
+    verbose: bool = False  # pycolmap's own logging
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """How long and how a model is trained (the learning-rate schedule itself is the model's)."""
+
+    iters: int | None = 3000  # stop after this many steps in total (None: no step limit)
+    seconds: float | None = None  # or after this many seconds of training in total
+    batch_rays: int = 1024  # rays per step, drawn uniformly from the pixels of every training view
+    seed: int = 0
+    log_every: int = 50  # steps between lines of log.jsonl
+    checkpoint_every: int = 1000  # steps between checkpoints (one is always written at the end)
+    eval_chunk: int = 8192  # rays rendered at once when evaluating
+
+
+@dataclass(frozen=True)
+class VideoOptions:
+    """The turntable's camera path and encoding (`windowshop render`); lengths in normalised units."""
+
+    frames: int = 120  # frames of one revolution (or of the whole path)
+    fps: float = 30.0
+    width: int = 256
+    height: int = 256
+    path: str = "orbit"  # "orbit", "spiral" or a nerfstudio camera-path JSON file
+    radius: float | None = None  # None: the median distance of the training cameras from the centre
+    elevation: float | None = None  # degrees above the orbit plane; None: the training views' median
+    start_angle: float = 0.0  # degrees of azimuth past the first training camera
+    fov: float | None = None  # vertical field of view in degrees; None: the training cameras' median
+    spiral_amplitude: float = 15.0  # degrees the spiral swings above and below its elevation
+    chunk: int = 8192  # rays rendered at once (bounds memory at any resolution)

@@ -7,6 +7,7 @@ of them. Models are registered by name in `MODELS` and rebuilt from their checkp
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass, field
 from typing import Any
@@ -50,6 +51,8 @@ class RadianceModel(nn.Module):
     """Base class of every model. Subclasses set `name` and implement `render_rays`."""
 
     name: str = ""
+    config_type: type = object  # the frozen dataclass of its settings
+    presets: dict[str, Any] = {}  # named instances of config_type; the first is the default
 
     def __init__(self, config: Any, bounds: Bounds):
         super().__init__()
@@ -93,3 +96,13 @@ def model_class(name: str) -> type[RadianceModel]:
         raise ValueError(f"unknown model {name!r}; choose one of {', '.join(sorted(MODELS))}")
     module, attr = MODELS[name].split(":")
     return getattr(importlib.import_module(module), attr)
+
+
+def model_config(name: str, preset: str | None = None, **overrides: Any) -> Any:
+    """The config of model `name`: its `preset` (default: its first) with `overrides` applied."""
+    cls = model_class(name)
+    preset = preset or next(iter(cls.presets))
+    if preset not in cls.presets:
+        raise ValueError(f"unknown preset {preset!r} of model {name!r}; "
+                         f"choose one of {', '.join(cls.presets)}")
+    return dataclasses.replace(cls.presets[preset], **overrides)

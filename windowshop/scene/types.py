@@ -64,6 +64,10 @@ class View:
     split: str  # "train" | "val" | "test"
     name: str  # path of the image on disk (or a synthetic name)
     alpha: np.ndarray | None = None  # (H, W) float32 in [0, 1]
+    # The camera exactly as the source file gives it: the source's own world frame, OpenGL axes,
+    # pixels of the image as stored on disk (before undistortion or resizing); None if made here.
+    stored_camera: Camera | None = None
+    distortion: dict[str, float] | None = None  # the source's lens distortion (undistorted on load)
 
 
 @dataclass
@@ -83,7 +87,10 @@ class Scene:
     near: float
     far: float
     transform: np.ndarray = field(default_factory=lambda: np.eye(4))
-    background: str = "white"  # "white" | "black" | "alpha" (keep RGBA: train on random backgrounds)
+    # "white" | "black" | "alpha". Every view's `image` is its colour composited over this
+    # background (over black for "alpha"), so with `alpha` it can be put over any colour c as
+    # image + (1 - alpha) * (c - background colour). Sources without alpha keep their own pixels.
+    background: str = "white"
 
     def split(self, name: str) -> list[View]:
         """The views of one split, in order."""

@@ -1,0 +1,100 @@
+"""End to end in a real browser: Debian's chromium, driven by Playwright, against `windowshop serve`.
+
+A small posed scene goes up through the page; once the job is done the video must play (its time
+advances) and dragging the spin viewer must change the frame. Screenshots of the result page on a
+desktop and on a phone-sized screen are kept in test-artifacts/.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from service_helpers import LiveService, posed_scene_zip
+
+CHROMIUM = "/usr/bin/chromium"
+ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+pytestmark = pytest.mark.skipif(shutil.which(CHROMIUM) is None,
+                                reason=f"{CHROMIUM} is absent (apt-get install chromium)")
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    live = LiveService(tmp_path_factory.mktemp("e2e") / "data").start()
+    yield live
+    live.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield browser
+        browser.close()
+
+
+def wait_until_done(page, timeout_ms: int = 240_000) -> None:
+    page.wait_for_selector("#job-state[data-state=done], #job-state[data-state=failed]",
+                           timeout=timeout_ms)
+    assert page.get_attribute("#job-state", "data-state") == "done", page.inner_text("#job")
+
+
+def test_upload_watch_play_and_spin(service, browser, tmp_path):
+    scene = posed_scene_zip(tmp_path / "scene.zip")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    page.goto(service.url)
+    assert page.is_visible("#drop") and page.is_disabled("#send")
+    page.set_input_files("#pick", str(scene))
+    assert "1 file chosen" in page.inner_text("#chosen-text")
+    page.click("#send")
+    page.wait_for_url("**/jobs/*")
+    job_id = page.url.rsplit("/", 1)[1]
+    page.wait_for_selector("#stages li[data-status=running]")  # a stage and its bar show up
+    wait_until_done(page)
+
+    page.wait_for_function("document.getElementById('video').currentTime > 0.1")
+    start = page.evaluate("document.getElementById('video').currentTime")
+    page.wait_for_timeout(600)
+    playing = page.evaluate("(() => { const v = document.getElementById('video');"
+                            " return {t: v.currentTime, paused: v.paused, loop: v.loop}; })()")
+    assert playing["t"] != start and not playing["paused"] and playing["loop"]
+
+    spin = page.locator("#spin")
+    page.wait_for_function("document.getElementById('spin-img').complete"
+                           " && document.getElementById('spin-img').naturalWidth > 0")
+    before = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
+    box = spin.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] * 0.3, y)
+    page.mouse.down()
+    for step in range(1, 11):
+        page.mouse.move(box["x"] + box["width"] * (0.3 + 0.03 * step), y)
+    page.mouse.up()
+    page.wait_for_function("document.getElementById('spin-img').complete")
+    after = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
+    assert after[0] != before[0] and after[1] != before[1]
+    assert after[2] != before[2]  # the picture itself changed, not only the attribute
+
+    assert page.is_visible("#download") and page.get_attribute("#download", "href").endswith("video.mp4")
+    assert job_id in page.get_attribute(f"#my-jobs a[href='/jobs/{job_id}']", "href")
+    page.screenshot(path=str(ARTIFACTS / "e2e-desktop.png"), full_page=True)
+    page.close()
+
+    phone = browser.new_context(viewport={"width": 390, "height": 844}, device_scale_factor=2,
+                                is_mobile=True, has_touch=True)
+    page = phone.new_page()
+    page.goto(f"{service.url}/jobs/{job_id}")  # the share link, opened elsewhere
+    wait_until_done(page)
+    page.wait_for_function("document.getElementById('video').currentTime > 0.1")
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= 390, "the page scrolls sideways on a phone"
+    page.screenshot(path=str(ARTIFACTS / "e2e-phone.png"), full_page=True)
+    phone.close()

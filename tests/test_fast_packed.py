@@ -1,0 +1,46 @@
+"""Packed (ragged) compositing against the dense compositing of the NeRF renderer."""
+
+import torch
+
+from windowshop.render.composite import compositing_weights
+from windowshop.render.packed import packed_weights, ray_starts, ray_sum
+
+
+def test_packed_weights_equal_dense_weights_ray_by_ray():
+    torch.manual_seed(0)
+    counts = torch.tensor([5, 0, 1, 12, 3])
+    ray = torch.repeat_interleave(torch.arange(5), counts)
+    sigma = torch.rand(int(counts.sum())) * 20
+    dt = torch.rand(int(counts.sum())) * 0.1
+    weights = packed_weights(sigma, dt, ray, counts)
+    for r, (start, n) in enumerate(zip(ray_starts(counts).tolist(), counts.tolist())):
+        if n:
+            dense = compositing_weights(sigma[start:start + n][None], dt[start:start + n][None])[0]
+            torch.testing.assert_close(weights[start:start + n], dense)
+
+
+def test_an_opaque_first_sample_takes_all_the_weight():
+    counts = torch.tensor([3])
+    weights = packed_weights(torch.tensor([1e4, 5.0, 5.0]), 0.1, torch.zeros(3, dtype=torch.long), counts)
+    torch.testing.assert_close(weights, torch.tensor([1.0, 0.0, 0.0]))
+
+
+def test_long_batches_keep_precision():
+    # 200k samples of dense rays before the last one: a float32 global sum would lose it
+    counts = torch.tensor([200_000, 2])
+    ray = torch.repeat_interleave(torch.arange(2), counts)
+    sigma = torch.full((200_002,), 50.0)
+    sigma[-2:] = torch.tensor([1.0, 2.0])
+    weights = packed_weights(sigma, 0.1, ray, counts)
+    expected = compositing_weights(torch.tensor([[1.0, 2.0]]), torch.tensor([[0.1, 0.1]]))[0]
+    torch.testing.assert_close(weights[-2:], expected)
+
+
+def test_ray_sum_and_its_gradient():
+    ray = torch.tensor([0, 0, 2, 2, 2])
+    values = torch.arange(10.0).view(5, 2).requires_grad_()
+    out = ray_sum(values, ray, 4)
+    torch.testing.assert_close(out, torch.tensor([[2.0, 4.0], [0, 0], [18, 21], [0, 0]]))
+    (out * torch.tensor([[1.0, 2.0], [0, 0], [3, 4], [0, 0]])).sum().backward()
+    torch.testing.assert_close(values.grad, torch.tensor([[1.0, 2.0]] * 2 + [[3.0, 4.0]] * 3))
+    torch.testing.assert_close(ray_sum(torch.ones(5), ray, 3), torch.tensor([2.0, 0.0, 3.0]))

@@ -1,0 +1,167 @@
+"""The trainer, ray batches, run folders, resume and chunked rendering, on hand-built scenes."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from windowshop.config import FitConfig, NerfConfig, SceneOptions
+from windowshop.fit.batches import PixelBank
+from windowshop.fit.checkpoint import load_checkpoint, load_run
+from windowshop.fit.evaluate import comparison_image, evaluate_run, mean_color_psnr
+from windowshop.fit.trainer import Progress, fit
+from windowshop.rays import camera_rays
+from windowshop.render.frames import render_camera
+from windowshop.scene.types import Camera, Scene, View
+
+TINY = NerfConfig(freqs=2, view_dependent=False, depth=2, width=16, n_coarse=8, n_fine=0)
+
+
+def look_at(eye, target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(4, 4) OpenGL camera-to-world matrix of a camera at `eye` looking at `target`."""
+    eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
+    back = (eye - target) / np.linalg.norm(eye - target)
+    right = np.cross(up, back)
+    right /= np.linalg.norm(right)
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.stack([right, np.cross(back, right), back], axis=1)
+    c2w[:3, 3] = eye
+    return c2w
+
+
+def toy_scene(size=12, background="white", alpha=False) -> Scene:
+    """Four training and one test camera around the origin; images of one flat colour."""
+    views = []
+    for i, angle in enumerate(np.linspace(0, 2 * np.pi, 5, endpoint=False)):
+        eye = (3 * np.cos(angle), 3 * np.sin(angle), 1.0)
+        camera = Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
+                        c2w=look_at(eye))
+        image = np.full((size, size, 3), (0.8, 0.4, 0.2), dtype=np.float32)
+        mask = np.ones((size, size), dtype=np.float32) * 0.5 if alpha else None
+        views.append(View(camera, image, "test" if i == 4 else "train", f"view_{i}.png", mask))
+    return Scene(views=views, format="hand", source=Path("toy"), aabb=np.array([[-1.0] * 3, [1.0] * 3]),
+                 near=1.5, far=4.5, background=background)
+
+
+def test_pixel_bank_rays_are_the_cameras_rays():
+    scene = toy_scene()
+    views = scene.split("train")
+    views[1].image = np.random.default_rng(0).random(views[1].image.shape).astype(np.float32)
+    bank = PixelBank(views, "cpu")
+    index = torch.tensor([0, 5, 144 + 37, 3 * 144 + 143])
+    batch = bank.rays(index)
+    for k, (view, pixel) in enumerate([(0, 0), (0, 5), (1, 37), (3, 143)]):
+        origins, directions = camera_rays(views[view].camera)
+        assert torch.allclose(batch.origins[k], origins[pixel], atol=1e-6)
+        assert torch.allclose(batch.directions[k], directions[pixel], atol=1e-6)
+        assert torch.equal(batch.rgb[k], torch.from_numpy(views[view].image.reshape(-1, 3)[pixel]))
+
+
+def test_alpha_targets_use_the_same_background_as_the_render():
+    bank = PixelBank(toy_scene(alpha=True).split("train"), "cpu", use_alpha=True)
+    batch = bank.sample(6)
+    bg = torch.rand(6, 3)
+    assert torch.allclose(batch.target(bg), 0.5 * batch.rgb + 0.5 * bg)
+
+
+def test_progress_follows_steps_or_seconds():
+    assert Progress(step=50).fraction(FitConfig(iters=200)) == 0.25
+    assert Progress(step=50, elapsed=30).fraction(FitConfig(iters=None, seconds=60)) == 0.5
+    assert Progress(step=150, elapsed=30).fraction(FitConfig(iters=200, seconds=60)) == 0.75
+
+
+def test_fit_writes_a_complete_run_folder(tmp_path):
+    scene = toy_scene()
+    metrics = fit(scene, "nerf", TINY, FitConfig(iters=4, batch_rays=32, log_every=2), tmp_path / "run",
+                  "cpu", scene_options=SceneOptions(views=4), show_progress=False)
+    run_dir = tmp_path / "run"
+    saved = json.loads((run_dir / "metrics.json").read_text())
+    for key in ("psnr", "ssim", "test_views", "train_seconds", "iterations"):
+        assert saved[key] == pytest.approx(metrics[key])
+    assert saved["iterations"] == 4 and saved["test_views"] == 1
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["model"] == "nerf" and config["model_config"]["width"] == 16
+    assert config["scene"]["options"]["views"] == 4
+    lines = [json.loads(x) for x in (run_dir / "log.jsonl").read_text().splitlines()]
+    assert [x["step"] for x in lines] == [1, 2, 4]
+    assert {"loss", "psnr", "rays_per_s", "samples_per_s", "lr"} <= set(lines[0])
+    assert len(list((run_dir / "eval").glob("*.png"))) == 1
+
+
+def test_load_run_rebuilds_the_same_model(tmp_path):
+    scene = toy_scene()
+    fit(scene, "nerf", TINY, FitConfig(iters=3, batch_rays=16), tmp_path, "cpu", show_progress=False)
+    run = load_run(tmp_path, "cpu")
+    assert run.step == 3 and run.model_name == "nerf" and run.background == "white"
+    assert run.model.config == TINY and not run.model.training
+    assert run.bounds.near == 1.5 and run.scene_source == "toy"
+    assert len(run.train_cameras) == 4
+    assert np.allclose(run.train_cameras[2].c2w, scene.split("train")[2].camera.c2w)
+    state = load_checkpoint(tmp_path)
+    assert state["model_state"].keys() == run.model.state_dict().keys()
+    assert all(torch.equal(state["model_state"][k], v) for k, v in run.model.state_dict().items())
+
+
+def test_resume_continues_from_the_saved_step(tmp_path):
+    scene = toy_scene()
+    config = FitConfig(iters=3, batch_rays=16, log_every=1)
+    fit(scene, "nerf", TINY, config, tmp_path, "cpu", show_progress=False)
+    before = load_checkpoint(tmp_path)
+    # nothing left of a spent budget: the weights stay as saved
+    fit(scene, "nerf", TINY, config, tmp_path, "cpu", resume=tmp_path, show_progress=False)
+    same = load_checkpoint(tmp_path)
+    assert same["step"] == 3
+    assert all(torch.equal(before["model_state"][k], same["model_state"][k]) for k in same["model_state"])
+    fit(scene, "nerf", TINY, dataclasses.replace(config, iters=5), tmp_path, "cpu", resume=tmp_path,
+        show_progress=False)
+    after = load_checkpoint(tmp_path)
+    steps = [json.loads(x)["step"] for x in (tmp_path / "log.jsonl").read_text().splitlines()]
+    assert after["step"] == 5 and steps == [1, 2, 3, 4, 5]
+    assert after["elapsed_seconds"] > before["elapsed_seconds"]
+    assert after["optimizer_state"]["state"][0]["step"] == 5  # Adam's moments carried over
+
+
+def test_chunked_rendering_matches_one_pass():
+    torch.manual_seed(0)
+    from windowshop.field.nerf import NerfModel
+    from windowshop.model import Bounds
+
+    model = NerfModel(TINY, Bounds.of_scene(toy_scene()))
+    camera = toy_scene().views[0].camera
+    whole, chunked = render_camera(model, camera, chunk=10_000), render_camera(model, camera, chunk=7)
+    assert whole.rgb.shape == (12, 12, 3) and whole.depth.shape == (12, 12)
+    assert np.allclose(whole.rgb, chunked.rgb, atol=1e-6)
+    assert np.allclose(whole.opacity, chunked.opacity, atol=1e-6)
+    assert model.training  # the caller's mode is restored
+
+
+def test_evaluate_run_uses_the_recorded_scene(tmp_path, monkeypatch):
+    scene = toy_scene(background="alpha", alpha=True)
+    fit(scene, "nerf", TINY, FitConfig(iters=2, batch_rays=16), tmp_path, "cpu", show_progress=False)
+    (tmp_path / "metrics.json").unlink()
+    import windowshop.scene as scene_module
+
+    monkeypatch.setattr(scene_module, "load_scene", lambda path, options: scene, raising=False)
+    metrics = evaluate_run(tmp_path, "cpu")
+    assert metrics["iterations"] == 2 and metrics["test_views"] == 1
+    assert json.loads((tmp_path / "metrics.json").read_text())["psnr"] == pytest.approx(metrics["psnr"])
+
+
+def test_comparison_image_is_truth_render_error():
+    truth = np.zeros((4, 5, 3))
+    render = np.full((4, 5, 3), 0.1)
+    panel = comparison_image(truth, render)
+    assert panel.shape == (4, 15, 3) and panel.dtype == np.uint8
+    assert panel[0, 0, 0] == 0 and panel[0, 5, 0] == 26 and panel[0, 10, 0] == 102
+
+
+def test_mean_color_floor():
+    scene = toy_scene()
+    train, test = scene.split("train"), scene.split("test")
+    for view, value in zip(train, (0.2, 0.6, 0.2, 0.6)):
+        view.image = np.full_like(view.image, value)
+    test[0].image = np.full_like(test[0].image, 0.5)  # mean 0.4 is off by 0.1: MSE 0.01, 20 dB
+    assert mean_color_psnr(train, test, "white") == pytest.approx(20.0, abs=1e-4)

@@ -1,0 +1,83 @@
+"""Ray marching through an occupancy grid: box intersection, the fused kernel against the
+reference, and that skipping never drops a sample where the density matters."""
+
+import math
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from windowshop.field import kernels
+from windowshop.field.grid import DenseGrid
+from windowshop.field.occupancy import OccupancyGrid, march_reference, ray_box
+
+needs_kernels = pytest.mark.skipif(not kernels.available("cpu"), reason="no C compiler")
+BOX = torch.tensor([[-1.0, -0.5, -0.8], [1.0, 0.5, 0.8]])
+
+
+def random_rays(n, seed=0):
+    """Rays from a sphere of radius 3 towards random points near the box."""
+    g = torch.Generator().manual_seed(seed)
+    origins = F.normalize(torch.randn(n, 3, generator=g), dim=-1) * 3.0
+    targets = torch.randn(n, 3, generator=g) * 0.6
+    return origins, F.normalize(targets - origins, dim=-1)
+
+
+def test_ray_box_known_answers():
+    origins = torch.tensor([[-3.0, 0.0, 0.0], [-3.0, 2.0, 0.0], [0.0, 0.0, 0.0]])
+    directions = torch.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    t_min, t_max = ray_box(origins, directions, BOX, near=0.1, far=10.0)
+    torch.testing.assert_close(t_min, torch.tensor([2.0, t_min[1], 0.1]))
+    torch.testing.assert_close(t_max, torch.tensor([4.0, t_min[1], 0.8]))  # the miss is empty
+
+
+@needs_kernels
+def test_fused_march_equals_the_reference():
+    origins, directions = random_rays(300)
+    g = torch.Generator().manual_seed(3)
+    occupied = torch.rand(12, 7, 9, generator=g) < 0.3
+    t_min, t_max = ray_box(origins, directions, BOX, 0.5, 6.0)
+    offsets = torch.rand(300, generator=g)
+    inv_cell = torch.tensor(occupied.shape, dtype=torch.float32) / (BOX[1] - BOX[0])
+    args = (origins, directions, t_min, t_max, offsets, 0.037, occupied, BOX[0].contiguous(), inv_cell)
+    ref = march_reference(*args)
+    t, ray, counts = kernels.march(*args)
+    assert len(ref) > 1000
+    assert torch.equal(counts, ref.counts) and torch.equal(ray, ref.ray)
+    assert torch.equal(t, ref.t)
+
+
+@pytest.mark.parametrize("fused", [False, True])
+def test_skipping_never_drops_a_sample_in_occupied_space(fused):
+    if fused and not kernels.available("cpu"):
+        pytest.skip("no C compiler")
+    torch.manual_seed(0)
+    shape = (13, 8, 11)
+    density = DenseGrid(shape, 1, BOX, fused=False)
+    with torch.no_grad():  # sparse blobs of matter in an empty box
+        density.values.copy_(torch.where(torch.rand(density.numel, 1) < 0.05, 3.0, -5.0))
+    threshold = 0.0
+    occupancy = OccupancyGrid(tuple(s - 1 for s in shape), BOX, fused=fused)
+    occupancy.set_from_vertices(density.vertex_values()[0], threshold)
+    assert 0.05 < occupancy.fraction() < 0.6
+    origins, directions = random_rays(400, seed=1)
+    everything = OccupancyGrid(tuple(s - 1 for s in shape), BOX, fused=False)  # all occupied
+    dense = everything.march(origins, directions, 0.0, 10.0, 0.01, jitter=False)
+    kept = occupancy.march(origins, directions, 0.0, 10.0, 0.01, jitter=False)
+    def points(s):
+        return origins[s.ray] + s.t[:, None] * directions[s.ray]
+    matter = density(points(dense))[:, 0] > threshold
+    assert matter.sum() > 100
+    dense_keys = set(zip(dense.ray[matter].tolist(), dense.t[matter].tolist()))
+    kept_keys = set(zip(kept.ray.tolist(), kept.t.tolist()))
+    assert dense_keys <= kept_keys  # every sample with matter survives
+    assert len(kept) < 0.7 * len(dense)  # and empty space was skipped
+
+
+def test_set_from_vertices_marks_cells_by_their_densest_corner():
+    occupancy = OccupancyGrid((2, 1, 1), torch.tensor([[0.0, 0, 0], [2, 1, 1]]))
+    vertex = torch.zeros(3, 2, 2)
+    vertex[2, 1, 1] = 1.0  # only a corner of the second cell is dense
+    occupancy.set_from_vertices(vertex, 0.5)
+    assert occupancy.occupied[:, 0, 0].tolist() == [False, True]
+    assert math.isclose(occupancy.fraction(), 0.5)

@@ -1,0 +1,154 @@
+"""The fast model: dense density and feature grids, a tiny colour MLP, occupancy skipping.
+
+A ray is marched only through occupied cells of the object's box (occupancy.py); densities come
+from a one-channel grid (post-activation: interpolate, then softplus), compositing weights from
+packed volume rendering (render/packed.py), and colour is evaluated only where a sample's weight
+matters: a feature grid read at those samples and an MLP of the features and the view direction's
+spherical harmonics. The grids start coarse and grow (trilinear resampling) during training; the
+occupancy grid is the set of cells with a corner dense enough to matter, refreshed every few steps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from windowshop.config import FAST_PRESETS, FastConfig
+from windowshop.field.grid import DenseGrid
+from windowshop.field.occupancy import OccupancyGrid
+from windowshop.field.optim import GridAdam
+from windowshop.model import Bounds, RadianceModel, RenderOutput
+from windowshop.render.packed import packed_weights, ray_sum
+
+
+def lattice_shape(extent: torch.Tensor, voxels: int) -> tuple[int, int, int]:
+    """Vertices per axis of a lattice of about `voxels` cubic cells over a box of `extent` (3,)."""
+    side = float(torch.prod(extent) / voxels) ** (1.0 / 3.0)
+    return tuple(max(2, int(round(float(e) / side)) + 1) for e in extent)
+
+
+def spherical_harmonics(d: torch.Tensor, degree: int) -> torch.Tensor:
+    """Real spherical harmonics up to `degree` (0..3) of unit directions (N, 3): (N, (degree+1)^2)."""
+    x, y, z = d.unbind(-1)
+    out = [torch.full_like(x, 0.28209479)]
+    if degree >= 1:
+        out += [-0.48860251 * y, 0.48860251 * z, -0.48860251 * x]
+    if degree >= 2:
+        xx, yy, zz = x * x, y * y, z * z
+        out += [1.09254843 * x * y, -1.09254843 * y * z, 0.31539157 * (3 * zz - 1),
+                -1.09254843 * x * z, 0.54627421 * (xx - yy)]
+    if degree >= 3:
+        out += [-0.59004359 * y * (3 * xx - yy), 2.89061144 * x * y * z,
+                -0.45704580 * y * (5 * zz - 1), 0.37317633 * z * (5 * zz - 3),
+                -0.45704580 * x * (5 * zz - 1), 1.44530572 * z * (xx - yy),
+                -0.59004359 * x * (xx - 3 * yy)]
+    return torch.stack(out, dim=-1)
+
+
+class FastModel(RadianceModel):
+    """Grids + tiny MLP + occupancy skipping; see the module docstring."""
+
+    name = "fast"
+    config_type = FastConfig
+    presets = FAST_PRESETS
+
+    def __init__(self, config: FastConfig, bounds: Bounds):
+        super().__init__(config, bounds)
+        aabb = bounds.aabb_tensor()
+        self.extent = aabb[1] - aabb[0]
+        shape = lattice_shape(self.extent, config.voxels_start)
+        final_voxel = float(torch.prod(self.extent) / config.voxels) ** (1.0 / 3.0)
+        self.density_scale = 1.0 / final_voxel  # softplus units are "per final voxel"
+        # initial opacity alpha_init over one final-resolution step (config.step voxels)
+        sigma0 = -math.log(1.0 - config.alpha_init) / config.step
+        self.shift = math.log(math.expm1(sigma0))
+        self.density = DenseGrid(shape, 1, aabb)
+        self.features = DenseGrid(shape, config.features, aabb)
+        self.occupancy = OccupancyGrid(tuple(s - 1 for s in shape), aabb)
+        n_dir = (config.sh_degree + 1) ** 2 if config.sh_degree >= 0 else 0
+        self.mlp = nn.Sequential(nn.Linear(config.features + n_dir, config.hidden), nn.ReLU(),
+                                 nn.Linear(config.hidden, 3))
+
+    # --- geometry -------------------------------------------------------------------------------
+    @property
+    def step_length(self) -> float:
+        """Marching step in world units for the current grid."""
+        return float(self.density.voxel.min()) * self.config.step
+
+    def sigma(self, points: torch.Tensor) -> torch.Tensor:
+        """Density (N,) at world points (N, 3)."""
+        return F.softplus(self.density(points)[:, 0] + self.shift) * self.density_scale
+
+    def color(self, points: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """Colour (N, 3) in [0, 1] at points (N, 3) seen along unit directions (N, 3)."""
+        h = self.features(points)
+        if self.config.sh_degree >= 0:
+            h = torch.cat([h, spherical_harmonics(directions, self.config.sh_degree)], dim=-1)
+        return torch.sigmoid(self.mlp(h))
+
+    # --- rendering ------------------------------------------------------------------------------
+    def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
+                    background: torch.Tensor) -> RenderOutput:
+        n_rays = origins.shape[0]
+        step = self.step_length
+        samples = self.occupancy.march(origins, directions, self.bounds.near, self.bounds.far,
+                                       step, jitter=self.training)
+        ray, t = samples.ray, samples.t
+        points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
+        weights = packed_weights(self.sigma(points), step, ray, samples.counts)
+        opacity = ray_sum(weights, ray, n_rays)
+        depth = ray_sum(weights * t, ray, n_rays)
+        # colour only where it shows: after termination or in near-empty space it cannot matter
+        keep = (weights.detach() > self.config.weight_threshold).nonzero()[:, 0]
+        kept_ray = ray.index_select(0, keep)
+        rgb = self.color(points.index_select(0, keep), directions.index_select(0, kept_ray))
+        color = ray_sum(weights.index_select(0, keep)[:, None] * rgb, kept_ray, n_rays)
+        color = color + (1.0 - opacity)[:, None] * background
+        return RenderOutput(rgb=color, depth=depth, opacity=opacity, num_samples=len(samples))
+
+    # --- training -------------------------------------------------------------------------------
+    def make_optimizer(self) -> torch.optim.Optimizer:
+        cfg = self.config
+        return GridAdam([
+            {"params": [self.density.values, self.features.values], "lr": cfg.lr_grid},
+            {"params": list(self.mlp.parameters()), "lr": cfg.lr_mlp},
+        ])
+
+    def lr_factor(self, progress: float) -> float:
+        return self.config.lr_final ** min(max(progress, 0.0), 1.0)
+
+    def target_shape(self, progress: float) -> tuple[int, int, int]:
+        """The lattice for `progress`: voxels grow geometrically at each `growth` point passed."""
+        cfg = self.config
+        stages = len(cfg.growth)
+        done = sum(progress >= p for p in cfg.growth)
+        voxels = cfg.voxels_start * (cfg.voxels / cfg.voxels_start) ** (done / stages) if stages else cfg.voxels
+        return lattice_shape(self.extent, round(voxels))
+
+    def before_step(self, step: int, progress: float) -> None:
+        shape = self.target_shape(progress)
+        if shape != self.density.shape:
+            self.grow(shape)
+        elif step >= self.config.occupancy_warmup and step % self.config.occupancy_every == 0:
+            self.refresh_occupancy()
+
+    @torch.no_grad()
+    def grow(self, shape: tuple[int, int, int]) -> None:
+        """Resample both grids to `shape` and rebuild the occupancy grid for it."""
+        occupied = self.occupancy.occupied
+        self.density.resize(shape)
+        self.features.resize(shape)
+        cells = tuple(s - 1 for s in shape)
+        grown = F.interpolate(occupied[None, None].float(), size=cells, mode="nearest")[0, 0] > 0
+        self.occupancy.occupied = grown
+
+    @torch.no_grad()
+    def refresh_occupancy(self) -> None:
+        """Skip the cells where no corner reaches `occupancy_alpha` over one step."""
+        alpha = self.config.occupancy_alpha
+        sigma = -math.log(1.0 - alpha) / self.step_length / self.density_scale
+        raw = math.log(math.expm1(sigma)) - self.shift  # softplus is monotone: threshold raw values
+        self.occupancy.set_from_vertices(self.density.vertex_values()[0], raw)

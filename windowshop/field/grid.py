@@ -1,0 +1,139 @@
+"""A dense grid of learned values over a box, read by trilinear interpolation.
+
+`trilinear_reference` is the obvious PyTorch version (any device, any autograd); on the CPU with the
+kernel library, `DenseGrid` uses the fused kernels instead, whose backward returns a *sparse*
+row gradient (only the rows a batch touched), so neither the gradient nor the optimizer
+(`optim.GridAdam`) ever sweeps the whole grid. Both agree to float rounding; tests hold them to it.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from windowshop.field import kernels
+
+
+def corner_weights(points: torch.Tensor, shape: tuple[int, int, int]
+                   ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rows (N, 8) int64 and weights (N, 8) of the 8 lattice vertices around `points` (N, 3).
+
+    Points are in grid units (vertex (i, j, k) at (i, j, k)) and clamped into the grid; corner
+    c = 4 dx + 2 dy + dz, rows of a row-major (X, Y, Z) lattice. Every axis needs >= 2 vertices.
+    """
+    dims = torch.tensor(shape, device=points.device)
+    g = torch.minimum(points.clamp(min=0.0), (dims - 1).to(points.dtype))
+    cell = torch.minimum(g.floor().long(), dims - 2)  # the top face belongs to the last cell
+    frac = g - cell.to(points.dtype)
+    _, ny, nz = shape
+    bits = torch.tensor([[c >> 2, (c >> 1) & 1, c & 1] for c in range(8)], device=points.device)
+    offsets = (bits[:, 0] * ny + bits[:, 1]) * nz + bits[:, 2]  # (8,)
+    base = (cell[:, 0] * ny + cell[:, 1]) * nz + cell[:, 2]
+    pair = torch.stack([1.0 - frac, frac], dim=-1)  # (N, 3, 2)
+    weights = (pair[:, 0, bits[:, 0]] * pair[:, 1, bits[:, 1]]) * pair[:, 2, bits[:, 2]]
+    return base[:, None] + offsets, weights
+
+
+def trilinear_reference(values: torch.Tensor, shape: tuple[int, int, int],
+                        points: torch.Tensor) -> torch.Tensor:
+    """Interpolate `values` (X*Y*Z, C) at `points` (N, 3) in grid units: (N, C). Plain autograd."""
+    rows, weights = corner_weights(points, shape)
+    gathered = values.index_select(0, rows.reshape(-1)).view(*rows.shape, values.shape[1])
+    return (gathered * weights[..., None]).sum(dim=1)
+
+
+class _FusedTrilinear(torch.autograd.Function):
+    """The kernel pair; the gradient of `values` is a coalesced sparse tensor of touched rows."""
+
+    @staticmethod
+    def forward(ctx, values: torch.Tensor, points: torch.Tensor, grid: "DenseGrid") -> torch.Tensor:
+        ctx.save_for_backward(points)
+        ctx.grid = grid
+        return kernels.trilinear_forward(values.detach(), grid.shape, points)
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):
+        (points,) = ctx.saved_tensors
+        grid = ctx.grid
+        accum, touched = grid.scratch()
+        kernels.trilinear_backward(points, grid.shape, grad_out.contiguous(), accum, touched)
+        rows, rows_grad = kernels.harvest(accum, touched)
+        grad = torch.sparse_coo_tensor(rows[None], rows_grad, accum.shape, is_coalesced=True,
+                                       check_invariants=False)  # sorted, unique by construction
+        return grad, None, None
+
+
+class DenseGrid(nn.Module):
+    """`channels` values on each vertex of an X x Y x Z lattice whose corners are the box corners.
+
+    `values` (X*Y*Z, channels) is the one parameter; `fused` picks the kernels (CPU only).
+    """
+
+    def __init__(self, shape: tuple[int, int, int], channels: int, aabb: torch.Tensor,
+                 fill: float = 0.0, fused: bool = True):
+        super().__init__()
+        if min(shape) < 2:
+            raise ValueError(f"a grid needs at least 2 vertices per axis, got {shape}")
+        self.shape = tuple(int(s) for s in shape)
+        self.fused = fused
+        self.values = nn.Parameter(torch.full((self.numel, channels), float(fill)))
+        self.register_buffer("aabb", aabb.detach().clone().float())  # (2, 3)
+        self.register_buffer("size", torch.tensor(self.shape))  # saved, so a checkpoint resizes
+        self._scratch: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    @property
+    def numel(self) -> int:
+        x, y, z = self.shape
+        return x * y * z
+
+    @property
+    def voxel(self) -> torch.Tensor:
+        """(3,) edge lengths of a cell."""
+        return (self.aabb[1] - self.aabb[0]) / (torch.tensor(self.shape, device=self.aabb.device) - 1)
+
+    def to_grid(self, points: torch.Tensor) -> torch.Tensor:
+        """World `points` (N, 3) in grid units (N, 3)."""
+        return ((points - self.aabb[0]) / self.voxel).contiguous()
+
+    def forward(self, points: torch.Tensor) -> torch.Tensor:
+        """Values (N, channels) at world `points` (N, 3); outside the box, at its nearest face."""
+        g = self.to_grid(points.detach())
+        if self.fused and kernels.available(g.device) and g.dtype == torch.float32:
+            return _FusedTrilinear.apply(self.values, g, self)
+        return trilinear_reference(self.values, self.shape, g)
+
+    def vertex_values(self) -> torch.Tensor:
+        """The values as a (channels, X, Y, Z) volume (a view for channels == 1)."""
+        return self.values.detach().T.reshape(-1, *self.shape)
+
+    def scratch(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The fused backward's zeroed gradient accumulator (V, C) and touched flags (V,)."""
+        if self._scratch is None or self._scratch[0].shape != self.values.shape:
+            self._scratch = (torch.zeros(self.values.shape), torch.zeros(self.numel, dtype=torch.uint8))
+        return self._scratch
+
+    @torch.no_grad()
+    def resize(self, shape: tuple[int, int, int]) -> None:
+        """Resample to a lattice of `shape` over the same box (trilinear), keeping the Parameter."""
+        volume = self.values.T.reshape(1, -1, *self.shape)
+        volume = F.interpolate(volume, size=tuple(shape), mode="trilinear", align_corners=True)
+        self._set(tuple(int(s) for s in shape), volume[0].reshape(self.values.shape[1], -1).T)
+
+    def _set(self, shape: tuple[int, int, int], values: torch.Tensor) -> None:
+        self.shape = shape
+        self.size.copy_(torch.tensor(shape))
+        # Keep the Parameter object (the optimizer holds it). While a graph of the old shape is
+        # alive, autograd keeps a gradient accumulator of the old shape, and swapping `.data` only
+        # drops it on a change of dtype: so pass through float64 once.
+        self.values.data = values.double()
+        self.values.data = values.contiguous()
+        self.values.grad = None
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        size = state_dict.get(prefix + "size")
+        if size is not None and tuple(size.tolist()) != self.shape:
+            shape = tuple(int(s) for s in size.tolist())
+            self._set(shape, torch.empty(shape[0] * shape[1] * shape[2], self.values.shape[1],
+                                         device=self.values.device))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

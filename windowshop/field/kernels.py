@@ -1,0 +1,165 @@
+"""The fused CPU kernels (kernels.c): built on first use with the system C compiler, cached, called
+through ctypes.
+
+The library has no torch headers, so building it takes well under a second and needs only `cc`;
+it is cached per source, flags and CPU under `~/.cache/windowshop` (or `$XDG_CACHE_HOME`). Without
+a compiler, on another device than the CPU, or with `WINDOWSHOP_KERNELS=0`, callers use their
+pure-PyTorch twins instead (`available()` says which). Every wrapper takes contiguous CPU tensors of
+the documented dtypes and writes into the given outputs.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from functools import lru_cache
+from pathlib import Path
+
+import torch
+
+log = logging.getLogger(__name__)
+
+SOURCE = Path(__file__).with_name("kernels.c")
+FLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-shared", "-fPIC"]
+
+_P, _I, _F = ctypes.c_void_p, ctypes.c_int64, ctypes.c_float
+_SIGNATURES = {
+    "trilinear_forward": [_P, _I, _I, _I, _I, _P, _I, _P],
+    "trilinear_backward": [_P, _I, _I, _I, _I, _I, _P, _P, _P],
+    "touched_rows": [_P, _I, _P],
+    "harvest_rows": [_P, _P, _I, _P, _I, _P],
+    "march_count": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P],
+    "march_fill": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P, _P, _P],
+    "adam_rows": [_P, _P, _P, _I, _P, _I, _P, _F, _F, _F, _F, _F],
+}
+
+
+def _cpu_id() -> str:
+    """What identifies this CPU's instruction set (the library is built for the host's)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+        return next((line for line in text.splitlines() if line.startswith("flags")), text[:2000])
+    except OSError:
+        return platform.processor() + platform.machine()
+
+
+def _cache_dir() -> Path:
+    root = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(root) / "windowshop" / "kernels"
+
+
+def _build(compiler: str, target: Path) -> None:
+    """Compile kernels.c into `target`, with OpenMP when the compiler has it."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+        out = Path(tmp) / target.name
+        for extra in (["-fopenmp"], []):
+            cmd = [compiler, *FLAGS, *extra, str(SOURCE), "-o", str(out), "-lm"]
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode == 0:
+                os.replace(out, target)  # atomic: concurrent builders never see half a file
+                return
+        raise RuntimeError(done.stderr.strip()[-2000:])
+
+
+@lru_cache(maxsize=1)
+def library() -> ctypes.CDLL | None:
+    """The loaded kernel library, or None when it cannot be had (see the module docstring)."""
+    if os.environ.get("WINDOWSHOP_KERNELS", "1") == "0":
+        return None
+    compiler = shutil.which(os.environ.get("CC", "cc"))
+    if compiler is None:
+        log.warning("no C compiler found: the fast model uses its (slower) pure-PyTorch path")
+        return None
+    source = SOURCE.read_bytes()
+    key = hashlib.sha256(b"\0".join([source, " ".join(FLAGS).encode(), compiler.encode(),
+                                     _cpu_id().encode()])).hexdigest()[:16]
+    target = _cache_dir() / f"windowshop_kernels_{key}.so"
+    try:
+        if not target.is_file():
+            _build(compiler, target)
+        lib = ctypes.CDLL(str(target))
+    except (OSError, RuntimeError) as err:
+        log.warning("building the fast kernels failed, using pure PyTorch: %s", err)
+        return None
+    for name, argtypes in _SIGNATURES.items():
+        getattr(lib, name).argtypes = argtypes
+        getattr(lib, name).restype = _I if name == "touched_rows" else None
+    return lib
+
+
+def available(device: torch.device | str) -> bool:
+    """Whether tensors on `device` can use the fused kernels."""
+    return torch.device(device).type == "cpu" and library() is not None
+
+
+def _ptr(t: torch.Tensor) -> int:
+    assert t.is_contiguous() and t.device.type == "cpu", "kernels take contiguous CPU tensors"
+    return t.data_ptr()
+
+
+def trilinear_forward(values: torch.Tensor, shape: tuple[int, int, int], points: torch.Tensor
+                      ) -> torch.Tensor:
+    """Interpolate `values` (X*Y*Z, C) float32 at `points` (N, 3) in grid units: (N, C)."""
+    n, c = points.shape[0], values.shape[1]
+    out = torch.empty(n, c, dtype=torch.float32)
+    library().trilinear_forward(_ptr(values), *shape, c, _ptr(points), n, _ptr(out))
+    return out
+
+
+def trilinear_backward(points: torch.Tensor, shape: tuple[int, int, int], grad_out: torch.Tensor,
+                       accum: torch.Tensor, touched: torch.Tensor) -> None:
+    """accum (V, C) += d(interpolation)/d(values) . grad_out (N, C); touched (V,) uint8 marks rows."""
+    library().trilinear_backward(_ptr(points), points.shape[0], *shape, accum.shape[1],
+                                 _ptr(grad_out), _ptr(accum), _ptr(touched))
+
+
+def harvest(accum: torch.Tensor, touched: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The touched rows (M,) int64 in increasing order and their accumulated values (M, C).
+
+    Clears those rows of `accum` and of `touched`, so the buffers are ready for the next step.
+    """
+    lib = library()
+    rows = torch.empty(touched.shape[0], dtype=torch.int64)
+    m = lib.touched_rows(_ptr(touched), touched.shape[0], _ptr(rows))
+    rows = rows[:m].clone()
+    values = torch.empty(m, accum.shape[1], dtype=torch.float32)
+    lib.harvest_rows(_ptr(accum), _ptr(touched), accum.shape[1], _ptr(rows), m, _ptr(values))
+    return rows, values
+
+
+def march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
+          t_max: torch.Tensor, offsets: torch.Tensor, step: float, occupancy: torch.Tensor,
+          lo: torch.Tensor, inv_cell: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Occupied samples t_min + (k + offset) step < t_max of rays (R, 3); see occupancy.march."""
+    lib = library()
+    r = origins.shape[0]
+    grid = occupancy.to(torch.uint8).contiguous()
+    common = [_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), _ptr(offsets), r, step,
+              _ptr(grid), *grid.shape, _ptr(lo), _ptr(inv_cell)]
+    counts = torch.empty(r, dtype=torch.int64)
+    lib.march_count(*common, _ptr(counts))
+    ends = torch.cumsum(counts, 0)
+    starts = (ends - counts).contiguous()
+    total = int(ends[-1]) if r else 0
+    t = torch.empty(total, dtype=torch.float32)
+    ray = torch.empty(total, dtype=torch.int64)
+    lib.march_fill(*common, _ptr(starts), _ptr(t), _ptr(ray))
+    return t, ray, counts
+
+
+def adam_rows(param: torch.Tensor, exp_avg: torch.Tensor, exp_avg_sq: torch.Tensor,
+              rows: torch.Tensor, grad: torch.Tensor, lr: float, betas: tuple[float, float],
+              eps: float, step: int) -> None:
+    """Adam step `step` (from 1) on `rows` (M,) of (V, C) tensors, in place; see optim.GridAdam."""
+    beta1, beta2 = betas
+    lr_c = lr / (1.0 - beta1 ** step)
+    sqrt_c2 = (1.0 - beta2 ** step) ** 0.5
+    library().adam_rows(_ptr(param), _ptr(exp_avg), _ptr(exp_avg_sq), param.shape[1], _ptr(rows),
+                        rows.shape[0], _ptr(grad), lr_c, beta1, beta2, eps, sqrt_c2)

@@ -1,0 +1,103 @@
+"""The NeRF of Mildenhall et al. 2020: an MLP field, coarse and fine passes, Adam with decay.
+
+`NerfField` maps encoded positions (and directions) to density and colour; `NerfModel` samples
+rays, composites them, and resamples where the coarse pass found matter for a separate fine field.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from windowshop.config import NERF_PRESETS, NerfConfig
+from windowshop.field.encoding import PositionalEncoding
+from windowshop.model import Bounds, RadianceModel, RenderOutput
+from windowshop.render.composite import Composite, composite
+from windowshop.render.sampling import hierarchical, stratified
+
+
+class NerfField(nn.Module):
+    """The paper's MLP: D x W ReLU trunk with the encoded input concatenated again after layer
+    `skip`, a density head, and a one-layer (W/2) colour branch that sees the encoded direction
+    when view dependence is on (off: colour and density from one linear head on the trunk, as
+    the reference code)."""
+
+    def __init__(self, config: NerfConfig):
+        super().__init__()
+        self.config = config
+        self.encode_pos = PositionalEncoding(3, config.freqs, config.encoding_pi)
+        self.encode_dir = PositionalEncoding(3, config.freqs_dir, config.encoding_pi)
+        width, n_in = config.width, self.encode_pos.out_dims
+        self.trunk = nn.ModuleList(
+            nn.Linear(n_in if i == 0 else width + (n_in if i == config.skip else 0), width)
+            for i in range(config.depth))
+        if config.view_dependent:
+            self.sigma_head = nn.Linear(width, 1)
+            self.feature = nn.Linear(width, width)
+            self.view = nn.Linear(width + self.encode_dir.out_dims, width // 2)
+            self.rgb_head = nn.Linear(width // 2, 3)
+        else:
+            self.head = nn.Linear(width, 4)
+
+    def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Density (N,) >= 0 and colour (N, 3) in [0, 1] at points `x` (N, 3) seen along unit `d` (N, 3)."""
+        inputs = self.encode_pos(x)
+        h = inputs
+        for i, layer in enumerate(self.trunk):
+            if i == self.config.skip and i > 0:
+                h = torch.cat([inputs, h], dim=-1)
+            h = torch.relu(layer(h))
+        if not self.config.view_dependent:
+            raw = self.head(h)
+            return torch.relu(raw[:, 3]), torch.sigmoid(raw[:, :3])
+        sigma = torch.relu(self.sigma_head(h)[:, 0])
+        h = torch.relu(self.view(torch.cat([self.feature(h), self.encode_dir(d)], dim=-1)))
+        return sigma, torch.sigmoid(self.rgb_head(h))
+
+
+class NerfModel(RadianceModel):
+    """Coarse field on N_c stratified samples; with N_f > 0 a fine field on N_c + N_f samples."""
+
+    name = "nerf"
+    config_type = NerfConfig
+    presets = NERF_PRESETS
+
+    def __init__(self, config: NerfConfig, bounds: Bounds):
+        super().__init__(config, bounds)
+        self.coarse = NerfField(config)
+        self.fine = NerfField(config) if config.n_fine > 0 else None
+        self.near = bounds.near if config.near is None else config.near
+        self.far = bounds.far if config.far is None else config.far
+
+    def _pass(self, field: NerfField, origins: torch.Tensor, directions: torch.Tensor,
+              t: torch.Tensor, far: torch.Tensor, background: torch.Tensor) -> Composite:
+        """Evaluate `field` at distances `t` (R, N) along the rays and composite."""
+        n = t.shape[1]
+        points = origins[:, None, :] + t[..., None] * directions[:, None, :]  # (R, N, 3)
+        dirs = directions[:, None, :].expand_as(points)
+        sigma, rgb = field(points.reshape(-1, 3), dirs.reshape(-1, 3))
+        return composite(sigma.view(-1, n), rgb.view(-1, n, 3), t, far, background)
+
+    def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
+                    background: torch.Tensor) -> RenderOutput:
+        """Render rays `origins` (R, 3), unit `directions` (R, 3) over `background` (R, 3)."""
+        rays = origins.shape[0]
+        near = torch.full((rays,), self.near, device=origins.device, dtype=origins.dtype)
+        far = torch.full_like(near, self.far)
+        t = stratified(near, far, self.config.n_coarse, jitter=self.training)
+        coarse = self._pass(self.coarse, origins, directions, t, far, background)
+        if self.fine is None:
+            return RenderOutput(rgb=coarse.rgb, depth=coarse.depth, opacity=coarse.opacity,
+                                num_samples=rays * t.shape[1])
+        t_fine = hierarchical(t, coarse.weights, self.config.n_fine, jitter=self.training)
+        fine = self._pass(self.fine, origins, directions, t_fine, far, background)
+        return RenderOutput(rgb=fine.rgb, depth=fine.depth, opacity=fine.opacity,
+                            aux={"rgb_coarse": coarse.rgb},
+                            num_samples=rays * (t.shape[1] + t_fine.shape[1]))
+
+    def make_optimizer(self) -> torch.optim.Optimizer:
+        return torch.optim.Adam(self.parameters(), lr=self.config.lr)
+
+    def lr_factor(self, progress: float) -> float:
+        """Exponential decay from `lr` to `lr_final` over the budget, as the paper."""
+        return (self.config.lr_final / self.config.lr) ** min(max(progress, 0.0), 1.0)

@@ -1,0 +1,111 @@
+"""Empty-space skipping: which cells of the box may hold matter, and ray marching that only
+places samples in those.
+
+Samples sit at t_min + (k + offset) * step along each ray, inside the box and [near, far]; a sample
+is kept when its cell is marked occupied. `march_reference` is the plain PyTorch version;
+`kernels.march` does the same without materialising the empty candidates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from windowshop.field import kernels
+
+
+@dataclass
+class Samples:
+    """S samples packed ray after ray (each ray's samples contiguous, in order of distance)."""
+
+    t: torch.Tensor  # (S,) distance along the ray
+    ray: torch.Tensor  # (S,) int64 index of the ray
+    counts: torch.Tensor  # (R,) int64 samples per ray
+
+    def __len__(self) -> int:
+        return self.t.shape[0]
+
+
+def ray_box(origins: torch.Tensor, directions: torch.Tensor, aabb: torch.Tensor, near: float,
+            far: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Where rays (R, 3) are inside the box `aabb` (2, 3) and [near, far]: t_min, t_max (R,).
+
+    Rays that miss get t_max == t_min (an empty interval).
+    """
+    safe = torch.where(directions.abs() < 1e-9, torch.full_like(directions, 1e-9), directions)
+    inv = 1.0 / safe
+    a, b = (aabb[0] - origins) * inv, (aabb[1] - origins) * inv
+    t_min = torch.minimum(a, b).amax(dim=-1).clamp(min=near)
+    t_max = torch.maximum(a, b).amin(dim=-1).clamp(max=far)
+    return t_min.contiguous(), torch.maximum(t_max, t_min).contiguous()
+
+
+def march_reference(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
+                    t_max: torch.Tensor, offsets: torch.Tensor, step: float,
+                    occupancy: torch.Tensor, lo: torch.Tensor, inv_cell: torch.Tensor) -> Samples:
+    """All candidates t_min + (k + offsets) step < t_max of rays (R, 3), kept where `occupancy`
+    (OX, OY, OZ) bool is set for the cell floor((x - lo) * inv_cell) (clamped into the grid)."""
+    span = float((t_max - t_min).max()) if t_min.numel() else 0.0
+    k = torch.arange(int(span / step) + 2, device=origins.device, dtype=origins.dtype)
+    t = t_min[:, None] + (k[None, :] + offsets[:, None]) * step  # (R, K)
+    points = origins[:, None, :] + t[..., None] * directions[:, None, :]
+    dims = torch.tensor(occupancy.shape, device=origins.device)
+    cell = torch.minimum(torch.floor((points - lo) * inv_cell).long().clamp(min=0), dims - 1)
+    keep = (t < t_max[:, None]) & occupancy[cell[..., 0], cell[..., 1], cell[..., 2]]
+    ray, index = keep.nonzero(as_tuple=True)
+    return Samples(t=t[ray, index], ray=ray, counts=keep.sum(dim=1))
+
+
+class OccupancyGrid(nn.Module):
+    """A boolean grid of (OX, OY, OZ) cells tiling the box `aabb`; all cells start occupied."""
+
+    def __init__(self, cells: tuple[int, int, int], aabb: torch.Tensor, fused: bool = True):
+        super().__init__()
+        self.fused = fused
+        self.register_buffer("aabb", aabb.detach().clone().float())
+        self.register_buffer("occupied", torch.ones(cells, dtype=torch.bool))
+
+    @property
+    def inv_cell(self) -> torch.Tensor:
+        """(3,) cells per unit length along each axis."""
+        dims = torch.tensor(self.occupied.shape, device=self.aabb.device, dtype=torch.float32)
+        return dims / (self.aabb[1] - self.aabb[0])
+
+    def fraction(self) -> float:
+        """Share of the cells marked occupied."""
+        return float(self.occupied.float().mean())
+
+    @torch.no_grad()
+    def set_from_vertices(self, vertex: torch.Tensor, threshold: float) -> None:
+        """Occupy exactly the cells of a vertex lattice (X, Y, Z) with a corner above `threshold`.
+
+        The cells are those of the lattice (X-1, Y-1, Z-1). Trilinear interpolation inside a cell
+        never exceeds its largest corner, so no point whose interpolated value (or any monotone
+        function of it) is above the threshold can lie in a skipped cell.
+        """
+        peak = F.max_pool3d(vertex[None, None], kernel_size=2, stride=1)[0, 0]
+        self.occupied = peak > threshold
+
+    @torch.no_grad()
+    def march(self, origins: torch.Tensor, directions: torch.Tensor, near: float, far: float,
+              step: float, jitter: bool) -> Samples:
+        """Samples of rays (R, 3) in occupied cells; `jitter` draws each ray's offset in [0, 1)."""
+        t_min, t_max = ray_box(origins, directions, self.aabb, near, far)
+        if jitter:
+            offsets = torch.rand(origins.shape[0], device=origins.device)
+        else:
+            offsets = torch.full((origins.shape[0],), 0.5, device=origins.device)
+        args = (origins.contiguous(), directions.contiguous(), t_min, t_max, offsets, step,
+                self.occupied, self.aabb[0].contiguous(), self.inv_cell.contiguous())
+        if self.fused and kernels.available(origins.device) and origins.dtype == torch.float32:
+            return Samples(*kernels.march(*args))
+        return march_reference(*args)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        saved = state_dict.get(prefix + "occupied")
+        if saved is not None and saved.shape != self.occupied.shape:
+            self.occupied = torch.ones(saved.shape, dtype=torch.bool, device=self.occupied.device)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

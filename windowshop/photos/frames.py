@@ -1,0 +1,70 @@
+"""Sharp, well-spread frames from a video walking around the object.
+
+The video is cut into equal spans of time and the sharpest frame (variance of the Laplacian) of
+each span is kept, so the frames cover the whole walk and motion blur is avoided.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import imageio_ffmpeg
+import numpy as np
+from PIL import Image
+
+from windowshop.errors import UserError
+from windowshop.photos.ingest import Photo, sharpness
+
+
+def _open(path: Path):
+    """(meta, frame generator) of imageio-ffmpeg; UserError when ffmpeg cannot read the file."""
+    try:
+        frames = imageio_ffmpeg.read_frames(str(path))
+        meta = next(frames)
+    except (OSError, RuntimeError, StopIteration) as err:
+        raise UserError(f"{path}: not a video we can read ({err}); export it as MP4 (H.264)") from err
+    return meta, frames
+
+
+def _shrink(frame: np.ndarray, max_side: int | None) -> tuple[np.ndarray, float]:
+    """(pixels at working size, scale) of one decoded frame (H, W, 3) uint8."""
+    height, width = frame.shape[:2]
+    scale = 1.0 if max_side is None else min(1.0, max_side / max(width, height))
+    if scale == 1.0:
+        return frame, 1.0
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    return np.asarray(Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS)), size[0] / width
+
+
+def sample_frames(path: str | Path, count: int, max_side: int | None,
+                  advance=lambda n=1: None) -> list[Photo]:
+    """The sharpest frame of each of `count` equal spans of the video at `path`, in time order.
+
+    `advance(n)` is called as frames are decoded, with n in fractions of `count` (for a bar of
+    `count` steps). Frames are named `<video stem>_<frame index>` (5 digits).
+    """
+    path = Path(path)
+    meta, frames = _open(path)
+    width, height = meta["size"]
+    expected = int(round(float(meta.get("duration") or 0) * float(meta.get("fps") or 0)))
+    if expected < count:  # no usable duration in the header: count the frames (a fast decode)
+        expected = imageio_ffmpeg.count_frames_and_secs(str(path))[0]
+    expected = max(expected, 1)
+    best: dict[int, tuple[float, int, np.ndarray, float]] = {}  # span -> (sharpness, index, ...)
+    reported = 0
+    for index, raw in enumerate(frames):
+        frame = np.frombuffer(raw, dtype=np.uint8).reshape(height, width, 3)
+        pixels, scale = _shrink(frame, max_side)
+        span = min(index * count // expected, count - 1)
+        score = sharpness(pixels)
+        if span not in best or score > best[span][0]:
+            best[span] = (score, index, pixels, scale)
+        if span > reported:
+            advance(span - reported)
+            reported = span
+    advance(count - reported)
+    if not best:
+        raise UserError(f"{path}: the video has no frames")
+    return [Photo(name=f"{path.stem}_{index:05d}", source=path, pixels=pixels, scale=scale,
+                  camera_key=("video", pixels.shape), sharpness=score)
+            for score, index, pixels, scale in (best[s] for s in sorted(best))]

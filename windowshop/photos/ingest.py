@@ -1,0 +1,223 @@
+"""The user's input (a folder or zip of photos, or a video) -> checked photos at working size.
+
+Photos are decoded with Pillow (HEIC/HEIF through pillow-heif), turned upright by their EXIF
+orientation and resized; the user's files are only ever read. Exact duplicates and very blurred
+photos are dropped and named, so the user knows which.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+from PIL import Image, ImageOps, UnidentifiedImageError
+
+from windowshop.errors import UserError
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".webp", ".heic", ".heif", ".tif", ".tiff", ".bmp"}
+VIDEO_SUFFIXES = {".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm"}
+MIN_PHOTOS = 3
+BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
+
+try:  # HEIC/HEIF (iPhone photos); without pillow-heif they are refused with a clear message
+    from pillow_heif import register_heif_opener
+
+    register_heif_opener()
+    HEIF = True
+except ImportError:
+    HEIF = False
+
+
+@dataclass
+class Photo:
+    """One usable photo (or video frame) at working resolution."""
+
+    name: str  # unique file stem, as in the source (a video frame: <video stem>_<frame index>)
+    source: Path  # the user's file it came from
+    pixels: np.ndarray  # (H, W, 3) uint8, upright
+    scale: float  # working pixels per pixel of the upright original
+    camera_key: tuple = ()  # photos with equal keys come from one camera (EXIF make, model, focal)
+    sharpness: float = 0.0
+
+
+@dataclass
+class Inputs:
+    """What the input held: photo files or one video, and what was ignored."""
+
+    kind: str  # "photos" | "video"
+    files: list[Path]
+    ignored: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Dropped:
+    """Photos left out, each with the reason."""
+
+    reasons: dict[str, str] = field(default_factory=dict)  # file name -> why
+
+
+def _is_hidden(path: PurePosixPath | Path) -> bool:
+    return any(part.startswith(".") or part == "__MACOSX" for part in path.parts)
+
+
+def _unzip(archive: Path, scratch: Path) -> Path:
+    """Extract the images of `archive` into `scratch/unzipped` (flattened; names made unique)."""
+    out = scratch / "unzipped"
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        with zipfile.ZipFile(archive) as zf:
+            for info in zf.infolist():
+                member = PurePosixPath(info.filename)
+                if info.is_dir() or _is_hidden(member):
+                    continue
+                suffix = member.suffix.lower()
+                if suffix not in IMAGE_SUFFIXES | VIDEO_SUFFIXES:
+                    continue
+                target = out / member.name  # the base name only: nothing can leave `out`
+                n = 2
+                while target.exists():
+                    target = out / f"{member.stem}-{n}{member.suffix}"
+                    n += 1
+                target.write_bytes(zf.read(info))
+    except zipfile.BadZipFile as err:
+        raise UserError(f"{archive}: not a readable zip file ({err}); zip the photos again") from err
+    return out
+
+
+def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
+    """The photo files or the video that `path` (folder, zip, video or photo) holds."""
+    path = Path(path)
+    if not path.exists():
+        raise UserError(f"{path}: no such file or folder")
+    if path.is_file() and path.suffix.lower() == ".zip":
+        path = _unzip(path, scratch)
+    if path.is_file():
+        suffix = path.suffix.lower()
+        if suffix in VIDEO_SUFFIXES:
+            return Inputs("video", [path])
+        if suffix in IMAGE_SUFFIXES:
+            return Inputs("photos", [path])
+        raise UserError(f"{path}: not a photo, a video, or a folder or zip of photos "
+                        f"(photos: {', '.join(sorted(IMAGE_SUFFIXES))}; "
+                        f"videos: {', '.join(sorted(VIDEO_SUFFIXES))})")
+    entries = sorted(p for p in path.iterdir() if p.is_file() and not _is_hidden(p.relative_to(path)))
+    photos = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
+    videos = [p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES]
+    if not photos and len(videos) == 1:
+        return Inputs("video", videos)
+    ignored = [p.name for p in entries if p not in photos]
+    return Inputs("photos", photos, ignored)
+
+
+def _camera_key(image: Image.Image, size: tuple[int, int]) -> tuple:
+    """(make, model, focal length, size): photos sharing it can share one set of intrinsics."""
+    exif = image.getexif()
+    focal = exif.get_ifd(0x8769).get(0x920A)  # Exif IFD: FocalLength
+    return (exif.get(0x010F), exif.get(0x0110), float(focal) if focal is not None else None, size)
+
+
+def read_photo(path: Path, max_side: int | None) -> Photo:
+    """Decode, turn upright (EXIF orientation) and shrink one photo; UserError if it is unusable."""
+    if path.suffix.lower() in {".heic", ".heif"} and not HEIF:
+        raise UserError(f"{path}: HEIC/HEIF photos need the pillow-heif package "
+                        f"(pip install pillow-heif), or export the photos as JPEG")
+    try:
+        with Image.open(path) as image:
+            image.load()
+            upright = ImageOps.exif_transpose(image)
+            key = _camera_key(image, upright.size)
+            rgb = upright.convert("RGB")
+    except UnidentifiedImageError as err:
+        raise UserError(f"{path}: not an image (its contents are not a photo format we read); "
+                        f"remove it from the input") from err
+    except (OSError, SyntaxError, ValueError) as err:
+        raise UserError(f"{path}: the image is truncated or damaged ({err}); copy it again from "
+                        f"the camera or remove it") from err
+    width, height = rgb.size
+    scale = 1.0 if max_side is None else min(1.0, max_side / max(width, height))
+    if scale < 1.0:
+        rgb = rgb.resize((max(1, round(width * scale)), max(1, round(height * scale))),
+                         Image.Resampling.LANCZOS)
+    pixels = np.asarray(rgb, dtype=np.uint8)
+    return Photo(name=path.stem, source=path, pixels=pixels, scale=rgb.size[0] / width,
+                 camera_key=key, sharpness=sharpness(pixels))
+
+
+def sharpness(pixels: np.ndarray) -> float:
+    """Variance of the Laplacian of the grey image (H, W, 3) uint8: low for blurred photos."""
+    grey = pixels.astype(np.float32).mean(-1) / 255.0
+    lap = (grey[:-2, 1:-1] + grey[2:, 1:-1] + grey[1:-1, :-2] + grey[1:-1, 2:]
+           - 4.0 * grey[1:-1, 1:-1])
+    return float(lap.var())
+
+
+def unique_names(photos: list[Photo]) -> None:
+    """Make the photos' names unique in place (a.jpg and a.png -> a, a-2)."""
+    seen: set[str] = set()
+    for photo in photos:
+        name, n = photo.name, 2
+        while name in seen:
+            name = f"{photo.name}-{n}"
+            n += 1
+        photo.name = name
+        seen.add(name)
+
+
+def drop_duplicates(photos: list[Photo], dropped: Dropped) -> list[Photo]:
+    """Photos with distinct pixels; the later copies of a photo are dropped and named."""
+    first: dict[str, Photo] = {}
+    kept = []
+    for photo in photos:
+        digest = hashlib.sha1(photo.pixels.tobytes() + str(photo.pixels.shape).encode()).hexdigest()
+        if digest in first:
+            dropped.reasons[photo.source.name] = f"exact duplicate of {first[digest].source.name}"
+            continue
+        first[digest] = photo
+        kept.append(photo)
+    return kept
+
+
+def drop_blurred(photos: list[Photo], dropped: Dropped, ratio: float = BLUR_RATIO) -> list[Photo]:
+    """Photos at least `ratio` times as sharp as the set's median; the others are dropped, named."""
+    if len(photos) <= MIN_PHOTOS:
+        return photos
+    limit = ratio * float(np.median([p.sharpness for p in photos]))
+    kept = []
+    for photo in photos:
+        if photo.sharpness < limit:
+            dropped.reasons[photo.source.name] = (
+                f"too blurred (sharpness {photo.sharpness / limit * ratio:.2f} of the median)")
+        else:
+            kept.append(photo)
+    return kept
+
+
+def check_enough(photos: list[Photo], dropped: Dropped, what: str = "photos") -> None:
+    """UserError unless at least MIN_PHOTOS photos are usable."""
+    if len(photos) >= MIN_PHOTOS:
+        return
+    why = "".join(f"\n  {name}: {reason}" for name, reason in dropped.reasons.items())
+    raise UserError(f"only {len(photos)} usable {what}; windowshop needs at least {MIN_PHOTOS} "
+                    f"(better 20-60, taken all around the object with overlap){why}")
+
+
+def read_photos(files: list[Path], max_side: int | None, dropped: Dropped,
+                advance=lambda n=1: None) -> list[Photo]:
+    """Decode every file (UserError naming each unusable one), then drop duplicates and blur."""
+    photos, errors = [], []
+    for path in files:
+        try:
+            photos.append(read_photo(path, max_side))
+        except UserError as err:
+            errors.append(str(err))
+        advance(1)
+    if errors:
+        raise UserError(f"{len(errors)} of {len(files)} files could not be read:\n  "
+                        + "\n  ".join(errors))
+    unique_names(photos)
+    photos = drop_blurred(drop_duplicates(photos, dropped), dropped)
+    check_enough(photos, dropped)
+    return photos

@@ -1,0 +1,231 @@
+"""`windowshop prepare`: photos (a folder or zip) or a video -> a posed scene folder.
+
+    input ──gather──> photos (upright, working size; duplicates and blur dropped)
+          ──pycolmap──> intrinsics and poses (retried with relaxed settings)
+          ──object──> box from the points most views see, masks on a plain background,
+                      normalised frame (object at the origin, up = +z, box in [-1, 1]^3)
+          ──write──> transforms.json, images/, masks/, colmap/, report.json, cameras.png
+
+The user's files are only read; all scratch work happens in a temporary folder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
+from windowshop.photos import objectbox, output, report
+from windowshop.photos.frames import sample_frames
+from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
+from windowshop.photos.progress import StageCallback, Stages
+from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
+from windowshop.scene import normalize
+from windowshop.scene.nerfstudio import WRITER_KEY
+
+MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
+# Share of the "prepare" progress each stage covers (retries add time but no progress).
+SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
+          "matching": 0.2, "placing cameras": 0.25, "finding the object": 0.05,
+          "writing the scene": 0.1}
+OUTPUTS = ("transforms.json", "report.json", "cameras.png", "images", "masks", "colmap")
+
+
+@dataclass
+class PrepareResult:
+    out_dir: Path
+    transforms: Path
+    report: dict
+
+
+@dataclass
+class Located:
+    """The object found in a reconstruction, and the normalised cameras."""
+
+    photos: list[output.PosedPhoto]  # normalised frame
+    transform: np.ndarray  # (4, 4) COLMAP frame -> normalised frame
+    aabb: np.ndarray  # (2, 3) normalised
+    points: np.ndarray  # (Q, 3) the object's sparse points, normalised
+    masks: dict[str, np.ndarray]  # photo name -> (H, W) bool; empty when none are made
+    background: str
+
+
+def check_out_dir(source: Path, out_dir: Path, overwrite: bool) -> None:
+    """Refuse an output folder that would touch the input, or an earlier result not to replace."""
+    src, out = source.resolve(), out_dir.resolve()
+    if out == src or src in out.parents or out in src.parents:
+        raise UserError(f"{out_dir}: the output folder must be outside the input {source} "
+                        f"(the input is never modified); choose another --out")
+    if not out.exists() or not any(out.iterdir()):
+        return
+    ours = out / "transforms.json"
+    if overwrite and ours.is_file() and WRITER_KEY in json.loads(ours.read_text()):
+        for name in OUTPUTS:
+            target = out / name
+            shutil.rmtree(target) if target.is_dir() else target.unlink(missing_ok=True)
+        return
+    raise UserError(f"{out_dir}: already exists and is not empty; choose a new --out folder"
+                    + ("" if overwrite else " (or pass --overwrite to replace an earlier prepare)"))
+
+
+def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list[Photo], Dropped]:
+    """The usable photos (or video frames) at working size."""
+    dropped = Dropped()
+    if inputs.kind == "video":
+        with stages.stage("sampling video frames", options.frames) as advance:
+            photos = sample_frames(inputs.files[0], options.frames, options.max_side, advance)
+        check_enough(photos, dropped, what="video frames")
+        return photos, dropped
+    if not inputs.files:
+        raise UserError("no photos found (looked for " + ", ".join(sorted(
+            {".jpg", ".png", ".webp", ".heic"})) + "); give a folder or zip of photos, or a video")
+    with stages.stage("reading photos", len(inputs.files)) as advance:
+        return read_photos(inputs.files, options.max_side, dropped, advance), dropped
+
+
+def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> SfmSettings:
+    """Matcher, shared camera and known intrinsics (scaled to working pixels) for pycolmap."""
+    matcher = options.matcher
+    if matcher == "auto":
+        matcher = "sequential" if inputs.kind == "video" else "exhaustive"
+    if matcher not in ("exhaustive", "sequential"):
+        raise UserError(f"unknown matcher {matcher!r}; use exhaustive, sequential or auto")
+    single = len({(p.camera_key, p.pixels.shape) for p in photos}) == 1
+    intrinsics = None
+    if options.intrinsics is not None:
+        if len({p.pixels.shape for p in photos}) != 1:
+            raise UserError("--intrinsics applies to photos of one size, but these differ in size")
+        intrinsics = tuple(float(v) * photos[0].scale for v in options.intrinsics)
+        single = True
+    return SfmSettings(matcher=matcher, intrinsics=intrinsics, single_camera=single,
+                       seed=options.seed, verbose=options.verbose)
+
+
+def check_placed(sfm: SfmResult, count: int) -> None:
+    """UserError when the photos lack texture, or too few of them could be placed."""
+    poor = sorted(name for name, k in sfm.keypoints.items() if k < MIN_KEYPOINTS)
+    texture = (f"the background has too little texture: fewer than {MIN_KEYPOINTS} features in "
+               f"{len(poor)} of {count} photos ({', '.join(poor[:10])}{' ...' if len(poor) > 10 else ''}); "
+               f"photograph the object on a patterned surface (a newspaper, a printed cloth) "
+               f"with detail around it")
+    if count - len(poor) < 3:
+        raise UserError(texture)
+    if len(sfm.placed) >= max(3, math.ceil(MIN_PLACED_SHARE * count)):
+        return
+    names = ", ".join(sfm.unplaced[:20]) + (" ..." if len(sfm.unplaced) > 20 else "")
+    raise UserError(f"could only place {len(sfm.placed)} of {count} photos; not placed: {names}. "
+                    f"Take more photos with overlap: walk around the object in small steps "
+                    f"(10-15 degrees) so that each photo shares most of its view with the next"
+                    + (f". Also, {texture}" if len(poor) > count // 4 else ""))
+
+
+def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Located:
+    """Object box, normalisation and masks for a reconstruction; `pixels` by image file name."""
+    posed = output.posed_photos(sfm.reconstruction)
+    cameras = [p.camera for p in posed]
+    rotation = normalize.rotation_to_z(normalize.up_vector(np.stack([c.c2w for c in cameras])))
+    points = np.array([p.xyz for p in sfm.reconstruction.points3D.values()]).reshape(-1, 3)
+    chosen = objectbox.object_points(points, cameras)
+    lo, hi = objectbox.object_box(chosen, cameras, rotation)
+    transform, aabb = normalize.similarity(rotation, lo, hi)
+    posed = output.normalised(posed, transform)
+    colour = objectbox.background_colour([pixels[p.image_name] for p in posed]) if masks else None
+    found: dict[str, np.ndarray] = {}
+    if colour is not None:
+        for p in posed:
+            region = objectbox.box_region(aabb[0], aabb[1], p.camera, np.eye(4))
+            found[p.name] = objectbox.foreground_mask(pixels[p.image_name], colour, region)
+    return Located(photos=posed, transform=transform, aabb=aabb,
+                   points=chosen @ transform[:3, :3].T + transform[:3, 3], masks=found,
+                   background="white" if colour is None or colour.mean() >= 128 else "black")
+
+
+def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,
+           advance) -> Path:
+    """Images, masks, transforms.json, the COLMAP model and the camera picture."""
+    (out_dir / "images").mkdir(parents=True, exist_ok=True)
+    if found.masks:
+        (out_dir / "masks").mkdir(exist_ok=True)
+    for p in found.photos:
+        shutil.copyfile(image_dir / p.image_name, out_dir / "images" / f"{p.name}.jpg")
+        if found.masks:
+            objectbox.mask_image(found.masks[p.name]).save(out_dir / "masks" / f"{p.name}.png")
+        advance(1)
+    (out_dir / "colmap").mkdir(exist_ok=True)
+    sfm.reconstruction.write(out_dir / "colmap")
+    near_far = normalize.near_far(np.stack([p.camera.center for p in found.photos]), found.aabb)
+    report.plot_cameras(out_dir / "cameras.png", [p.camera for p in found.photos], found.aabb,
+                        found.points)
+    return output.write_transforms_json(out_dir, found.photos, found.transform, found.aabb, near_far,
+                                        found.background, bool(found.masks), str(source))
+
+
+def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
+            found: Located, stages: Stages) -> dict:
+    by_name = {p.name: p for p in photos}
+    return {
+        "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
+        "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
+        "unplaced": [n.rsplit(".", 1)[0] for n in sfm.unplaced],
+        "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
+        "points": int(sfm.reconstruction.num_points3D()), "object_points": int(len(found.points)),
+        "features_median": int(np.median(list(sfm.keypoints.values()))),
+        "attempts": [vars(a) for a in sfm.attempts], "masks": bool(found.masks),
+        "background": found.background, "aabb": found.aabb.tolist(),
+        "views": [{"name": p.name, "photo": str(by_name[p.name].source)} for p in found.photos],
+        "seconds": {k: round(v, 3) for k, v in stages.seconds.items()},
+    }
+
+
+def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = PrepareOptions(),
+            on_stage: StageCallback | None = None, show: bool = True) -> PrepareResult:
+    """Pose the photos or video at `source` into a scene folder `out_dir` (see module docstring).
+
+    `on_stage("prepare", fraction)` is called as the work advances; `show` draws stages and
+    progress bars on stderr. UserError says what went wrong and what to do.
+    """
+    source, out_dir = Path(source), Path(out_dir)
+    check_out_dir(source, out_dir, options.overwrite)
+    stages = Stages(on_stage, show, report_as="prepare", fractions=SHARES)
+    with tempfile.TemporaryDirectory(prefix="windowshop-prepare-") as tmp:
+        work = Path(tmp)
+        inputs = gather_inputs(source, work)
+        photos, dropped = _read(inputs, options, stages)
+        image_dir = work / "images"
+        image_dir.mkdir()
+        for photo in photos:
+            output.write_image(work, photo.name, photo.pixels)
+        names = [f"{p.name}.jpg" for p in photos]
+        sfm = reconstruct(image_dir, names, work, _settings(inputs, photos, options), stages)
+        check_placed(sfm, len(photos))
+        with stages.stage("finding the object"):
+            found = locate(sfm, {f"{p.name}.jpg": p.pixels for p in photos}, options.masks)
+        with stages.stage("writing the scene", len(found.photos)) as advance:
+            transforms = _write(out_dir, image_dir, sfm, found, source, advance)
+        summary = _report(source, inputs, photos, dropped, sfm, found, stages)
+    report.write_report(out_dir, summary)
+    if show:
+        print("\n".join(report.summary_lines(summary) + [f"scene written to {out_dir}"]),
+              file=sys.stderr)
+    return PrepareResult(out_dir=out_dir, transforms=transforms, report=summary)
+
+
+def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
+    """"fx,fy,cx,cy" (pixels) -> a tuple; UserError if it is not four positive numbers."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4 or min(values) <= 0:
+        raise UserError(f"--intrinsics {text!r}: give four positive numbers fx,fy,cx,cy in pixels")
+    return values

@@ -1,0 +1,64 @@
+"""The prepare report: `report.json` (what was used, dropped and placed, how well, how long) and
+`cameras.png` (the cameras around the object box, seen from the side and from above)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from windowshop.scene.plot import box_lines, frustum_lines
+from windowshop.scene.types import Camera
+
+
+def write_report(out_dir: Path, report: dict) -> Path:
+    """`report.json` in `out_dir`."""
+    path = out_dir / "report.json"
+    path.write_text(json.dumps(report, indent=2))
+    return path
+
+
+def summary_lines(report: dict) -> list[str]:
+    """A few lines for the terminal."""
+    lines = [f"placed {report['placed']} of {report['used']} photos "
+             f"(mean reprojection error {report['reprojection_error_px']:.2f} px)"]
+    lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
+    if report["unplaced"]:
+        lines.append(f"  could not place: {', '.join(report['unplaced'])}")
+    if report["masks"]:
+        lines.append(f"  foreground masks made ({report['background']} background)")
+    return lines
+
+
+def plot_cameras(out: Path, cameras: list[Camera], aabb: np.ndarray, points: np.ndarray) -> Path:
+    """Draw the cameras (normalised frame) as frusta around the box `aabb` (2, 3), with the
+    object's sparse `points` (P, 3), from the side and from above, into the PNG `out`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    depth = 0.15 * float(np.median([np.linalg.norm(c.center) for c in cameras]))
+    fig = plt.figure(figsize=(10, 5))
+    for i, (elev, azim, title) in enumerate([(20, -60, "cameras around the object"),
+                                             (90, -90, "from above")]):
+        ax = fig.add_subplot(1, 2, i + 1, projection="3d")
+        for cam in cameras:
+            for seg in frustum_lines(cam, depth):
+                ax.plot(*seg.T, color="tab:blue", linewidth=0.6)
+        for seg in box_lines(aabb):
+            ax.plot(*seg.T, color="tab:red", linewidth=1.0)
+        if len(points):
+            ax.scatter(*points.T, s=1, color="k", alpha=0.4)
+        everything = np.concatenate([np.stack([c.center for c in cameras]), aabb])
+        mid, half = everything.mean(0), 0.55 * np.ptp(everything, axis=0).max()
+        ax.set_xlim(mid[0] - half, mid[0] + half)
+        ax.set_ylim(mid[1] - half, mid[1] + half)
+        ax.set_zlim(mid[2] - half, mid[2] + half)
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return out

@@ -1,0 +1,75 @@
+"""Whole images from any `RadianceModel`: rays of a camera rendered in chunks, without gradients.
+
+Memory is bounded by `chunk` rays at a time whatever the image size; results come back as numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from windowshop.model import RadianceModel
+from windowshop.rays import camera_rays
+from windowshop.scene.types import Camera
+
+BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
+
+
+@dataclass
+class Frame:
+    """One rendered image."""
+
+    rgb: np.ndarray  # (H, W, 3) float32 in [0, 1]
+    depth: np.ndarray  # (H, W) float32, expected distance along the ray (0 where empty)
+    opacity: np.ndarray  # (H, W) float32 in [0, 1]
+
+
+def display_background(name: str) -> tuple[float, float, float]:
+    """The colour to show a scene's background as: its own, or white for "alpha" scenes."""
+    return BACKGROUNDS.get(name, BACKGROUNDS["white"])
+
+
+def model_device(model: torch.nn.Module) -> torch.device:
+    """The device of the model's first parameter or buffer (the CPU for an empty model)."""
+    for tensor in list(model.parameters()) + list(model.buffers()):
+        return tensor.device
+    return torch.device("cpu")
+
+
+@torch.no_grad()
+def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions: torch.Tensor,
+                        background: torch.Tensor, chunk: int = 8192
+                        ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Render rays `origins`, `directions` (R, 3) over `background` (3,) in chunks of `chunk` rays.
+
+    Returns rgb (R, 3), depth (R,), opacity (R,) on the rays' device. Switches the model to eval
+    mode (deterministic samples) for the call and restores its previous mode.
+    """
+    was_training = model.training
+    model.eval()
+    try:
+        parts = []
+        for start in range(0, origins.shape[0], chunk):
+            o, d = origins[start:start + chunk], directions[start:start + chunk]
+            out = model.render_rays(o, d, background.expand(o.shape[0], 3))
+            parts.append((out.rgb, out.depth, out.opacity))
+    finally:
+        model.train(was_training)
+    rgb, depth, opacity = (torch.cat(p, dim=0) for p in zip(*parts))
+    return rgb, depth, opacity
+
+
+def render_camera(model: RadianceModel, camera: Camera,
+                  background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                  chunk: int = 8192) -> Frame:
+    """Render every pixel of `camera` (in the model's normalised frame) on the model's device."""
+    device = model_device(model)
+    origins, directions = camera_rays(camera, device=device)
+    bg = torch.tensor(background, dtype=torch.float32, device=device)
+    rgb, depth, opacity = render_rays_chunked(model, origins, directions, bg, chunk)
+    shape = (camera.height, camera.width)
+    return Frame(rgb=rgb.clamp(0, 1).reshape(*shape, 3).cpu().numpy(),
+                 depth=depth.reshape(shape).cpu().numpy(),
+                 opacity=opacity.reshape(shape).cpu().numpy())

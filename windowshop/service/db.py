@@ -1,0 +1,194 @@
+"""The job store: one SQLite table shared by the web process, the worker and the job processes.
+
+Every process opens its own short-lived connections (WAL mode, so readers never wait for the
+writer). A running job carries a `run_token` drawn when the worker claims it; progress and results
+are written only while the token still matches, so a job process left over from before a restart,
+a cancellation or a deletion can no longer change the job.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+QUEUED = "queued"
+RUNNING = ("preparing", "training", "rendering")
+DONE, FAILED, CANCELLED = "done", "failed", "cancelled"
+FINISHED = (DONE, FAILED, CANCELLED)
+STATES = (QUEUED, *RUNNING, *FINISHED)
+MAX_ATTEMPTS = 3  # a job interrupted this often (it may be what kills the worker) fails instead
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    state TEXT NOT NULL,
+    stage TEXT,
+    progress REAL NOT NULL DEFAULT 0,
+    stages TEXT NOT NULL DEFAULT '{}',
+    eta_seconds REAL,
+    error TEXT,
+    input_kind TEXT NOT NULL,
+    input_summary TEXT NOT NULL DEFAULT '',
+    created_at REAL NOT NULL,
+    started_at REAL,
+    finished_at REAL,
+    run_token TEXT,
+    attempts INTEGER NOT NULL DEFAULT 0,
+    frames INTEGER NOT NULL DEFAULT 0
+);
+CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_at);
+"""
+
+
+@dataclass
+class Job:
+    """One row of the store."""
+
+    id: str
+    state: str
+    input_kind: str  # "photos" | "video" | "zip"
+    input_summary: str
+    created_at: float
+    stage: str | None = None  # the running or last stage: "preparing" | "training" | "rendering"
+    progress: float = 0.0  # of `stage`, in [0, 1]
+    stages: dict[str, float] = field(default_factory=dict)  # progress of every stage seen so far
+    eta_seconds: float | None = None
+    error: str | None = None
+    started_at: float | None = None
+    finished_at: float | None = None
+    run_token: str | None = None
+    attempts: int = 0
+    frames: int = 0  # per-frame images available once done
+
+
+class JobStore:
+    """Jobs in `path` (an SQLite file, created with its table on first use)."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self._connect() as db:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.executescript(_SCHEMA)
+
+    @contextmanager
+    def _connect(self) -> Iterator[sqlite3.Connection]:
+        db = sqlite3.connect(self.path, timeout=30, isolation_level=None)
+        db.row_factory = sqlite3.Row
+        try:
+            yield db
+        finally:
+            db.close()
+
+    @contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        """A write transaction that takes the lock up front, so read-then-write steps are atomic."""
+        with self._connect() as db:
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                yield db
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+            db.execute("COMMIT")
+
+    def create(self, job_id: str, input_kind: str, input_summary: str,
+               max_queued: int | None = None) -> Job | None:
+        """Queue a new job; None (and nothing stored) when `max_queued` jobs already wait."""
+        with self._transaction() as db:
+            waiting = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (QUEUED,)).fetchone()[0]
+            if max_queued is not None and waiting >= max_queued:
+                return None
+            db.execute("INSERT INTO jobs (id, state, input_kind, input_summary, created_at) "
+                       "VALUES (?, ?, ?, ?, ?)", (job_id, QUEUED, input_kind, input_summary, time.time()))
+        return self.get(job_id)
+
+    def get(self, job_id: str) -> Job | None:
+        with self._connect() as db:
+            row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return _job(row) if row else None
+
+    def count_queued(self) -> int:
+        with self._connect() as db:
+            return db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (QUEUED,)).fetchone()[0]
+
+    def queue_position(self, job: Job) -> int:
+        """How many queued jobs run before `job` (0: it is next)."""
+        with self._connect() as db:
+            return db.execute("SELECT COUNT(*) FROM jobs WHERE state = ? AND created_at < ?",
+                              (QUEUED, job.created_at)).fetchone()[0]
+
+    def claim_next(self, run_token: str) -> Job | None:
+        """Move the oldest queued job to its first stage under `run_token`; None when none waits."""
+        with self._transaction() as db:
+            row = db.execute("SELECT id FROM jobs WHERE state = ? ORDER BY created_at LIMIT 1",
+                             (QUEUED,)).fetchone()
+            if row is None:
+                return None
+            db.execute("UPDATE jobs SET state = ?, stage = ?, progress = 0, stages = '{}', "
+                       "eta_seconds = NULL, error = NULL, run_token = ?, attempts = attempts + 1, "
+                       "started_at = ? WHERE id = ?",
+                       (RUNNING[0], RUNNING[0], run_token, time.time(), row["id"]))
+        return self.get(row["id"])
+
+    def report(self, job_id: str, run_token: str, stage: str, progress: float,
+               stages: dict[str, float], eta_seconds: float | None) -> bool:
+        """Record the running job's stage and progress; False when the job is no longer this run's."""
+        with self._connect() as db:
+            cur = db.execute("UPDATE jobs SET state = ?, stage = ?, progress = ?, stages = ?, "
+                             "eta_seconds = ? WHERE id = ? AND run_token = ?",
+                             (stage, stage, progress, json.dumps(stages), eta_seconds, job_id, run_token))
+        return cur.rowcount == 1
+
+    def finish(self, job_id: str, run_token: str, state: str, error: str | None = None,
+               frames: int = 0) -> bool:
+        """End this run of the job as `state` (done or failed); False when it is no longer this run's."""
+        with self._connect() as db:
+            cur = db.execute("UPDATE jobs SET state = ?, error = ?, frames = ?, eta_seconds = NULL, "
+                             "finished_at = ?, run_token = NULL WHERE id = ? AND run_token = ?",
+                             (state, error, frames, time.time(), job_id, run_token))
+        return cur.rowcount == 1
+
+    def cancel(self, job_id: str) -> Job | None:
+        """Cancel a queued or running job (the worker then stops its process); None when unknown."""
+        with self._connect() as db:
+            db.execute(f"UPDATE jobs SET state = ?, eta_seconds = NULL, finished_at = ?, "
+                       f"run_token = NULL WHERE id = ? AND state IN ({_marks(1 + len(RUNNING))})",
+                       (CANCELLED, time.time(), job_id, QUEUED, *RUNNING))
+        return self.get(job_id)
+
+    def delete(self, job_id: str) -> bool:
+        with self._connect() as db:
+            return db.execute("DELETE FROM jobs WHERE id = ?", (job_id,)).rowcount == 1
+
+    def requeue_interrupted(self) -> tuple[list[str], list[str]]:
+        """After a restart: running jobs go back to the queue, or fail after MAX_ATTEMPTS tries.
+
+        Returns (requeued ids, failed ids).
+        """
+        with self._transaction() as db:
+            rows = db.execute(f"SELECT id, attempts FROM jobs WHERE state IN ({_marks(len(RUNNING))})",
+                              RUNNING).fetchall()
+            requeued = [r["id"] for r in rows if r["attempts"] < MAX_ATTEMPTS]
+            failed = [r["id"] for r in rows if r["attempts"] >= MAX_ATTEMPTS]
+            db.executemany("UPDATE jobs SET state = ?, run_token = NULL, eta_seconds = NULL "
+                           "WHERE id = ?", [(QUEUED, i) for i in requeued])
+            message = f"the job was interrupted {MAX_ATTEMPTS} times while running; it was given up"
+            db.executemany("UPDATE jobs SET state = ?, error = ?, run_token = NULL, finished_at = ? "
+                           "WHERE id = ?", [(FAILED, message, time.time(), i) for i in failed])
+        return requeued, failed
+
+
+def _marks(n: int) -> str:
+    return ", ".join("?" * n)
+
+
+def _job(row: sqlite3.Row) -> Job:
+    values = dict(row)
+    values["stages"] = json.loads(values["stages"])
+    return Job(**values)

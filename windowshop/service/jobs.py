@@ -1,0 +1,91 @@
+"""One job, run in its own process by the worker: the uploaded input through the pipeline.
+
+A job's folder holds `input/` (the checked upload), `work/` (the pipeline's scene and run, removed
+when the job ends) and `result/` (video.mp4, poster.jpg, frames/0000.jpg ...), which the API serves.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+from windowshop.service.db import RUNNING, JobStore
+from windowshop.service.settings import ServiceSettings
+from windowshop.service.uploads import VIDEO_SUFFIXES
+from windowshop.service.worker import job_dir
+
+# The pipeline's stage names, and the job states they put the job in.
+STAGE_STATES = {"prepare": "preparing", "fit": "training", "train": "training", "render": "rendering"}
+# Rough share of a job's time each stage takes, for the time-left estimate.
+STAGE_WEIGHTS = {"preparing": 0.3, "training": 0.55, "rendering": 0.15}
+
+
+class ProgressReporter:
+    """Records the pipeline's `on_stage(stage, fraction)` calls as the job's state and time left.
+
+    The estimate extrapolates the time spent so far over the job's weighted progress, counting only
+    the stages this job runs (a posed scene skips "preparing"). Writes are throttled to one every
+    `min_interval` seconds, except stage changes and stage ends.
+    """
+
+    def __init__(self, store: JobStore, job_id: str, run_token: str, clock=time.monotonic,
+                 min_interval: float = 0.5):
+        self.store, self.job_id, self.run_token = store, job_id, run_token
+        self.clock, self.min_interval = clock, min_interval
+        self.started = clock()
+        self.stages: dict[str, float] = {}
+        self.state: str | None = None
+        self._last_write = float("-inf")
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        state = STAGE_STATES.get(stage, stage)
+        if state not in RUNNING:
+            return
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        changed = state != self.state
+        if changed:
+            for earlier in self.stages:  # a later stage began: the earlier ones are over
+                self.stages[earlier] = 1.0
+            self.state = state
+        self.stages[state] = fraction
+        now = self.clock()
+        if changed or fraction >= 1.0 or now - self._last_write >= self.min_interval:
+            self._last_write = now
+            self.store.report(self.job_id, self.run_token, state, fraction, dict(self.stages),
+                              self.eta_seconds(now))
+
+    def overall(self) -> float:
+        """The job's progress in [0, 1] over the stages it runs."""
+        first = RUNNING.index(next(iter(self.stages))) if self.stages else 0
+        runs = RUNNING[first:]
+        total = sum(STAGE_WEIGHTS[s] for s in runs)
+        return sum(STAGE_WEIGHTS[s] * self.stages.get(s, 0.0) for s in runs) / total
+
+    def eta_seconds(self, now: float) -> float | None:
+        done, elapsed = self.overall(), now - self.started
+        if done < 0.02 or elapsed < 1.0:  # too early to say anything useful
+            return None
+        return round(elapsed * (1.0 - done) / done, 1)
+
+
+def reset_folders(folder: Path) -> tuple[Path, Path]:
+    """Empty `work/` and `result/` (a requeued job starts over); returns them."""
+    work, result = folder / "work", folder / "result"
+    for path in (work, result):
+        shutil.rmtree(path, ignore_errors=True)
+        path.mkdir(parents=True)
+    return work, result
+
+
+def pipeline_input(folder: Path) -> Path:
+    """What the pipeline reads: the input folder, the one folder a zip held, or the video file."""
+    entries = list((folder / "input").iterdir())
+    if len(entries) == 1 and (entries[0].is_dir() or entries[0].suffix in VIDEO_SUFFIXES):
+        return entries[0]
+    return folder / "input"
+
+
+def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
+    """The worker's job function: run the pipeline on the job's input; returns the frame count."""
+    raise NotImplementedError  # replaced once windowshop.pipeline lands

@@ -1,0 +1,54 @@
+"""The service's settings: flags of `windowshop serve`, or `WINDOWSHOP_*` environment variables.
+
+Every limit on uploads and every knob of the job the worker runs lives here, so tests and the load
+check make jobs fast (few training seconds, few small frames) without touching code.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class ServiceSettings(BaseSettings):
+    """Settings of one service: its data folder, its upload limits and the jobs its worker runs."""
+
+    model_config = SettingsConfigDict(env_prefix="WINDOWSHOP_", frozen=True)
+
+    data_dir: Path = Path("windowshop-data")  # jobs.sqlite3 and one folder per job
+    host: str = "127.0.0.1"
+    port: int = 8000
+
+    # Uploads (checked by content, see uploads.py).
+    max_files: int = 200  # files per job
+    max_file_bytes: int = 200 * 2**20  # one file (a video or a zip may be large)
+    max_upload_bytes: int = 500 * 2**20  # the whole request
+    max_pixels: int = 40_000_000  # per image: larger ones are refused as decompression bombs
+    min_photos: int = 3  # fewer photos cannot be posed
+    max_zip_entries: int = 2000
+    max_unpacked_bytes: int = 1 * 2**30  # a zip's entries together, once unpacked
+    max_video_seconds: float = 300.0
+    max_queued: int = 100  # jobs waiting; more are refused with 503 until the queue drains
+
+    # The worker.
+    concurrency: int = 1  # jobs run at once, each in its own process
+    poll_seconds: float = 0.5  # how often the worker looks at the queue and at cancellations
+    device: str | None = None  # torch device of the jobs; None picks CUDA when present
+
+    # The job: knobs passed on to windowshop.pipeline.make_video (None keeps the pipeline's default).
+    model: str | None = None  # "fast" or "nerf"
+    train_seconds: float | None = None  # training time budget
+    train_steps: int | None = None  # or a number of training steps
+    frames: int = 60  # turntable frames, also the images of the drag-to-spin viewer
+    fps: int = 30
+    frame_size: int = 256  # pixels of the longer side of the video and the frames
+    work_side: int | None = None  # resize photos so the longer side is at most this
+
+    @property
+    def db_path(self) -> Path:
+        return self.data_dir / "jobs.sqlite3"
+
+    @property
+    def jobs_dir(self) -> Path:
+        return self.data_dir / "jobs"

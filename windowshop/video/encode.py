@@ -1,0 +1,195 @@
+"""Frames to files: H.264 MP4, animated GIF/WebP, a colour-mapped depth video, a poster, images.
+
+Frames arrive one at a time (`TurntableWriter.add`), so memory holds one full-size frame however
+long or large the video: the MP4s stream into ffmpeg (imageio-ffmpeg's bundled binary, no shell),
+images go straight to disk, and only the GIF/WebP previews, capped at `max_side` pixels, are kept
+until the end (Pillow writes animations in one call).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import imageio_ffmpeg
+import numpy as np
+from PIL import Image
+
+from windowshop.errors import UserError
+
+DEPTH_COLORMAP = "inferno"  # perceptually uniform; near surfaces bright, far ones dark
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """(H, W, C) floats in [0, 1] to uint8, rounded."""
+    return np.clip(np.rint(np.asarray(image, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
+
+
+def check_video_size(width: int, height: int) -> None:
+    """H.264 in yuv420p (what browsers and phones play) halves the colour planes: sizes must be even."""
+    if width < 2 or height < 2 or width % 2 or height % 2:
+        raise UserError(f"an MP4 needs an even width and height (H.264 yuv420p); got {width}x{height}, "
+                        "choose an even --size")
+
+
+class Mp4Writer:
+    """Streams (H, W, 3) uint8 frames into an H.264 MP4 (yuv420p, +faststart for the web)."""
+
+    def __init__(self, path: str | Path, width: int, height: int, fps: float, crf: int = 18):
+        check_video_size(width, height)
+        self.path, self.size, self.frames = Path(path), (width, height), 0
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        # quality=None: the rate is set by -crf below (18: visually lossless for smooth renders).
+        self._gen = imageio_ffmpeg.write_frames(
+            str(self.path), self.size, fps=fps, codec="libx264", pix_fmt_out="yuv420p", quality=None,
+            macro_block_size=1, ffmpeg_log_level="error",
+            output_params=["-crf", str(crf), "-movflags", "+faststart"])
+        self._gen.send(None)
+
+    def write(self, frame: np.ndarray) -> None:
+        """Append one (H, W, 3) uint8 frame."""
+        if frame.shape != (self.size[1], self.size[0], 3) or frame.dtype != np.uint8:
+            raise ValueError(f"frame {frame.shape} {frame.dtype} does not match {self.size} uint8 RGB")
+        self._gen.send(np.ascontiguousarray(frame))
+        self.frames += 1
+
+    def close(self) -> None:
+        """Finish the file (ffmpeg writes the index; +faststart moves it to the front)."""
+        self._gen.close()
+
+
+class AnimationWriter:
+    """Collects frames for an animated GIF or WebP (by suffix), downscaled to `max_side` pixels."""
+
+    def __init__(self, path: str | Path, fps: float, max_side: int = 512):
+        self.path, self.fps, self.max_side = Path(path), fps, max_side
+        self.kind = self.path.suffix.lower().lstrip(".")
+        if self.kind not in ("gif", "webp"):
+            raise UserError(f"{self.path}: an animation must end in .gif or .webp")
+        self._frames: list[Image.Image] = []
+
+    def write(self, frame: np.ndarray) -> None:
+        """Keep one (H, W, 3) uint8 frame (GIF frames as 256-colour images: a quarter of the memory)."""
+        image = Image.fromarray(frame)
+        image.thumbnail((self.max_side, self.max_side), Image.Resampling.LANCZOS)
+        self._frames.append(image.quantize(256) if self.kind == "gif" else image)
+
+    def close(self) -> None:
+        """Write the looping animation."""
+        if not self._frames:
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        first, rest = self._frames[0], self._frames[1:]
+        options = {"lossless": False, "quality": 85} if self.kind == "webp" else {"optimize": False}
+        # GIF durations are whole centiseconds; Pillow rounds each frame's milliseconds.
+        first.save(self.path, save_all=True, append_images=rest, duration=1000.0 / self.fps, loop=0,
+                   **options)
+        self._frames = []
+
+
+def save_image(frame: np.ndarray, path: str | Path) -> Path:
+    """Write one (H, W, 3) uint8 frame as PNG or JPEG (by suffix)."""
+    path = Path(path)
+    if path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise UserError(f"{path}: a poster or frame image must end in .png, .jpg or .jpeg")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    options = {"quality": 92} if path.suffix.lower() != ".png" else {}
+    Image.fromarray(frame).save(path, **options)
+    return path
+
+
+def depth_colormap(depth: np.ndarray, opacity: np.ndarray, near: float, far: float,
+                   background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Colour-map a rendered depth (H, W) between `near` and `far` into (H, W, 3) uint8.
+
+    `depth` is the renderers' sum of weights times distance, so dividing by `opacity` (H, W) gives
+    the distance of the surface; pixels then blend into `background` by opacity, as empty space has
+    no meaningful depth. One fixed range for the whole video keeps the colours from flickering.
+    """
+    import matplotlib
+
+    lut = matplotlib.colormaps[DEPTH_COLORMAP](np.linspace(0.0, 1.0, 256))[:, :3]  # (256, 3)
+    alpha = np.clip(np.asarray(opacity, dtype=np.float64), 0.0, 1.0)
+    surface = np.asarray(depth, dtype=np.float64) / np.maximum(alpha, 1e-6)
+    t = np.clip((far - surface) / max(far - near, 1e-9), 0.0, 1.0)
+    colour = lut[np.rint(t * 255).astype(np.int64)]
+    alpha = alpha[..., None]
+    return to_uint8(alpha * colour + (1 - alpha) * np.asarray(background))
+
+
+@dataclass(frozen=True)
+class VideoOutputs:
+    """Which files one turntable writes; None skips an output."""
+
+    mp4: Path | None = None
+    gif: Path | None = None
+    webp: Path | None = None
+    depth: Path | None = None  # a colour-mapped depth MP4
+    poster: Path | None = None  # one frame, PNG or JPEG
+    poster_frame: int = 0
+    frames_dir: Path | None = None  # every frame as frame_0000.<frames_format>
+    frames_format: str = "png"  # "png" or "jpg"
+    preview_side: int = 512  # longer side of the GIF/WebP frames at most
+
+    def files(self) -> list[Path]:
+        """The single files that will be written (not the frames folder)."""
+        return [p for p in (self.mp4, self.gif, self.webp, self.depth, self.poster) if p is not None]
+
+
+class TurntableWriter:
+    """Feeds each rendered frame to every requested output; use as a context manager."""
+
+    def __init__(self, outputs: VideoOutputs, width: int, height: int, fps: float,
+                 depth_range: tuple[float, float] = (0.0, 1.0)):
+        if outputs.frames_format not in ("png", "jpg"):
+            raise UserError(f"frames format must be png or jpg, got {outputs.frames_format!r}")
+        self.outputs, self.depth_range, self.frames = outputs, depth_range, 0
+        if outputs.mp4 is not None or outputs.depth is not None:
+            check_video_size(width, height)  # before any file is started
+        self._videos = [Mp4Writer(p, width, height, fps) for p in (outputs.mp4,) if p is not None]
+        self._depth = Mp4Writer(outputs.depth, width, height, fps) if outputs.depth else None
+        self._animations = [AnimationWriter(p, fps, outputs.preview_side)
+                            for p in (outputs.gif, outputs.webp) if p is not None]
+        if outputs.frames_dir is not None:
+            Path(outputs.frames_dir).mkdir(parents=True, exist_ok=True)
+
+    def add(self, rgb: np.ndarray, depth: np.ndarray | None = None,
+            opacity: np.ndarray | None = None) -> None:
+        """The next frame: colour (H, W, 3) in [0, 1]; depth and opacity (H, W) for the depth video."""
+        frame = to_uint8(rgb)
+        for writer in [*self._videos, *self._animations]:
+            writer.write(frame)
+        if self._depth is not None:
+            self._depth.write(depth_colormap(depth, opacity, *self.depth_range))
+        if self.outputs.poster is not None and self.frames == self.outputs.poster_frame:
+            save_image(frame, self.outputs.poster)
+        if self.outputs.frames_dir is not None:
+            save_image(frame, Path(self.outputs.frames_dir) / f"frame_{self.frames:04d}.{self.outputs.frames_format}")
+        self.frames += 1
+
+    def close(self) -> None:
+        """Finish every file."""
+        for writer in [*self._videos, *self._animations, *([self._depth] if self._depth else [])]:
+            writer.close()
+
+    def __enter__(self) -> "TurntableWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def read_video(path: str | Path) -> tuple[dict, Iterator[np.ndarray]]:
+    """Decode a video with ffmpeg: its metadata ("size", "fps", "codec", ...) and its (H, W, 3) uint8 frames."""
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    width, height = meta["size"]
+    return meta, (np.frombuffer(b, dtype=np.uint8).reshape(height, width, 3) for b in reader)
+
+
+def probe_video(path: str | Path) -> dict:
+    """What a video holds, decoded: {"frames", "width", "height", "fps", "codec"}."""
+    meta, frames = read_video(path)
+    return {"frames": sum(1 for _ in frames), "width": int(meta["size"][0]),
+            "height": int(meta["size"][1]), "fps": float(meta["fps"]), "codec": meta.get("codec", "")}

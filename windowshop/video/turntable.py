@@ -1,0 +1,121 @@
+"""The turntable: a trained model rendered along a camera path, frame by frame, into files.
+
+`render_run` is what `windowshop render`, the demo and the web service call; `render_turntable`
+does the work for any `RadianceModel` and list of cameras.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from windowshop.config import VideoOptions
+from windowshop.model import Bounds, RadianceModel
+from windowshop.scene.types import Camera
+from windowshop.video.encode import TurntableWriter, VideoOutputs
+from windowshop.video.paths import turntable_path, write_camera_path
+
+
+@dataclass(frozen=True)
+class TurntableResult:
+    """What one turntable render wrote, and how fast."""
+
+    frames: int
+    width: int
+    height: int
+    fps: float
+    files: list[Path]
+    render_seconds: float  # rendering and encoding, excluding loading the run
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / max(self.render_seconds, 1e-9)
+
+
+def depth_range(cameras: list[Camera], bounds: Bounds) -> tuple[float, float]:
+    """Fixed (near, far) for the depth video: the box's nearest and farthest points over all cameras."""
+    lo, hi = np.asarray(bounds.aabb, dtype=np.float64)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    eyes = np.stack([c.center for c in cameras])  # (F, 3)
+    outside = np.maximum(np.maximum(lo - eyes, eyes - hi), 0.0)  # (F, 3): 0 inside the box
+    near = float(np.linalg.norm(outside, axis=1).min())
+    far = float(np.linalg.norm(eyes[:, None] - corners[None], axis=2).max())
+    near, far = max(near, bounds.near), min(far, bounds.far)
+    return (near, far) if far > near else (bounds.near, bounds.far)
+
+
+def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: VideoOutputs, fps: float,
+                     background: tuple[float, float, float] = (1.0, 1.0, 1.0), chunk: int = 8192,
+                     progress: bool = True,
+                     on_frame: Callable[[int, int], None] | None = None) -> TurntableResult:
+    """Render `cameras` (one size) with `model` on its device and write every requested output.
+
+    Each frame is rendered `chunk` rays at a time and handed to the writers at once, so memory
+    stays bounded at any resolution and length. `on_frame(done, total)` reports progress (the
+    web service's jobs); `progress` shows a tqdm bar on stderr.
+    """
+    from windowshop.render.frames import render_camera
+
+    width, height = cameras[0].width, cameras[0].height
+    if any((c.width, c.height) != (width, height) for c in cameras):
+        raise ValueError("every camera of a video must have the same image size")
+    outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame, len(cameras) - 1))
+    start = time.perf_counter()
+    with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer:
+        for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):
+            frame = render_camera(model, camera, background=background, chunk=chunk)
+            writer.add(frame.rgb, frame.depth, frame.opacity)
+            if on_frame is not None:
+                on_frame(k + 1, len(cameras))
+    if outputs.frames_dir is not None:
+        write_camera_path(cameras, Path(outputs.frames_dir) / "camera_path.json", fps)
+    return TurntableResult(frames=len(cameras), width=width, height=height, fps=fps,
+                           files=outputs.files(), render_seconds=time.perf_counter() - start)
+
+
+def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs,
+               device: torch.device | str = "cpu", progress: bool = True,
+               on_frame: Callable[[int, int], None] | None = None) -> TurntableResult:
+    """The turntable of a run folder: its model along the path `options` describe, into `outputs`."""
+    from windowshop.fit.checkpoint import load_run
+    from windowshop.render.frames import display_background
+
+    run = load_run(run_dir, device)
+    cameras = turntable_path(run.train_cameras, options)
+    return render_turntable(run.model, cameras, outputs, options.fps,
+                            background=display_background(run.background), chunk=options.chunk,
+                            progress=progress, on_frame=on_frame)
+
+
+def default_outputs(out: str | Path, gif: bool | str = False, webp: bool | str = False,
+                    depth: bool | str = False, poster: bool | str = False,
+                    frames_dir: str | Path | None = None, frames_format: str = "png") -> VideoOutputs:
+    """Outputs beside the MP4 `out`: True names a file after it (spin.gif, spin_depth.mp4,
+    spin_poster.jpg), a string is used as the file's path."""
+    out = Path(out)
+
+    def pick(flag: bool | str, name: str) -> Path | None:
+        return None if not flag else Path(flag) if isinstance(flag, str) else out.with_name(name)
+
+    return VideoOutputs(mp4=out, gif=pick(gif, f"{out.stem}.gif"), webp=pick(webp, f"{out.stem}.webp"),
+                        depth=pick(depth, f"{out.stem}_depth.mp4"),
+                        poster=pick(poster, f"{out.stem}_poster.jpg"),
+                        frames_dir=Path(frames_dir) if frames_dir else None, frames_format=frames_format)
+
+
+def render_command(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs,
+                   device: torch.device | str) -> TurntableResult:
+    """`windowshop render`: render the run's turntable and say what was written."""
+    result = render_run(run_dir, options, outputs, device)
+    print(f"{result.frames} frames {result.width}x{result.height} at {result.fps:g} fps, rendered at "
+          f"{result.frames_per_second:.2f} frames/s on {device}")
+    for path in [*result.files, *([outputs.frames_dir] if outputs.frames_dir else [])]:
+        print(f"wrote {path}")
+    return result

@@ -3,7 +3,7 @@
 Each model is trained briefly on the built-in object (a trained model matters: the fast model
 skips empty space it has learnt), or loaded from `--run` folders, then renders an orbit into an
 H.264 MP4 exactly as `windowshop render` does; the time covers rendering and encoding.
-Usage: python bench/bench_render.py [--size 256] [--frames 4] [--train-seconds 30] [--run RUN ...]
+Usage: python bench/bench_render.py [--size 256] [--frames 3] [--train-seconds 30] [--run RUN ...]
        [--model nerf:tiny --model fast] [--device cpu]
 """
 
@@ -54,7 +54,7 @@ def available(name: str) -> bool:
 
 def train_briefly(name: str, preset: str | None, seconds: float, out: Path, device) -> dict:
     """Fit `name` on the built-in object for `seconds`; returns fit's metrics."""
-    scene = synthetic_scene(n_train=40, n_test=4, size=64)
+    scene = synthetic_scene(n_train=40, n_test=1, size=64)  # one held-out view: a quick sanity PSNR
     return fit(scene, name, model_config(name, preset), FitConfig(iters=None, seconds=seconds), out,
                device, show_progress=False)
 
@@ -79,7 +79,7 @@ def time_run(run_dir: Path, size: int, frames: int, device) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=256, help="pixels a side")
-    parser.add_argument("--frames", type=int, default=4, help="timed frames per model")
+    parser.add_argument("--frames", type=int, default=3, help="timed frames per model")
     parser.add_argument("--train-seconds", type=float, default=30.0, help="training of each model")
     parser.add_argument("--model", action="append", default=None, metavar="NAME[:PRESET]",
                         help="models to train and time (default: nerf:tiny and fast, if present)")

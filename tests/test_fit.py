@@ -165,3 +165,20 @@ def test_mean_color_floor():
         view.image = np.full_like(view.image, value)
     test[0].image = np.full_like(test[0].image, 0.5)  # mean 0.4 is off by 0.1: MSE 0.01, 20 dB
     assert mean_color_psnr(train, test, "white") == pytest.approx(20.0, abs=1e-4)
+
+
+def test_fit_command_seconds_replace_the_step_budget(tmp_path, monkeypatch):
+    import windowshop.scene as scene_module
+    from windowshop.errors import UserError
+    from windowshop.fit.command import build_model_config, fit_command
+
+    monkeypatch.setattr(scene_module, "load_scene", lambda path, options: toy_scene(), raising=False)
+    overrides = {"depth": 2, "width": 16, "n_coarse": 8, "freqs": 2}
+    metrics = fit_command("toy", SceneOptions(), "nerf", "tiny", overrides,
+                          {"seconds": 0.5, "iters": None, "batch_rays": 16}, str(tmp_path), None, "cpu")
+    assert metrics["iterations"] >= 1 and metrics["train_seconds"] >= 0.5
+    assert json.loads((tmp_path / "config.json").read_text())["fit_config"]["iters"] is None
+    with pytest.raises(UserError, match="--n-fine"):
+        build_model_config("fast", None, {"n_fine": 0})
+    with pytest.raises(UserError, match="resumed run keeps its model"):
+        fit_command(None, SceneOptions(), "nerf", None, {"width": 8}, {}, None, str(tmp_path), "cpu")

@@ -123,3 +123,15 @@ def test_learning_rate_decays_exponentially_to_the_final_rate():
     assert model.lr_factor(1.0) == pytest.approx(0.1)
     assert model.lr_factor(0.5) == pytest.approx(0.1 ** 0.5)
     assert model.make_optimizer().param_groups[0]["lr"] == 5e-4
+
+
+def test_rendering_without_gradients_slices_the_points_and_agrees():
+    torch.manual_seed(0)
+    model = NerfModel(dataclasses.replace(SMALL, n_coarse=70), BOUNDS).eval()
+    origins, directions = rays(1000)  # 70,000 coarse + 86,000 fine points: more than one slice
+    bg = torch.ones(1000, 3)
+    with torch.no_grad():
+        sliced = model.render_rays(origins, directions, bg)
+    whole = model.render_rays(origins, directions, bg)
+    assert torch.allclose(sliced.rgb, whole.rgb, atol=1e-6)
+    assert torch.allclose(sliced.depth, whole.depth, atol=1e-5)

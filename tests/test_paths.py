@@ -106,6 +106,12 @@ def test_orbit_options_override_radius_elevation_and_fov():
     assert cams[0].fy == pytest.approx(16 / math.tan(math.radians(30)))
 
 
+def test_a_portrait_turntable_keeps_the_training_view_across_its_narrow_side():
+    train = capture(np.arange(0, 360, 45), [30] * 8, size=40, focal=50.0)  # square photos
+    (cam,) = turntable_path(train, VideoOptions(frames=1, width=32, height=64))
+    assert cam.fx == pytest.approx(50.0 * 32 / 40) and cam.fy == cam.fx  # width sees what they saw
+
+
 def test_spiral_swings_elevation_up_and_down_around_the_orbit():
     train = capture(np.arange(0, 360, 45), [30] * 8)
     cams = turntable_path(train, VideoOptions(frames=40, width=32, height=32, path="spiral",

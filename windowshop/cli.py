@@ -137,6 +137,21 @@ def cmd_prepare(args: argparse.Namespace) -> None:
     prepare(args.input, args.out, options)
 
 
+def cmd_video(args: argparse.Namespace) -> None:
+    from dataclasses import replace
+
+    from windowshop.device import pick_device
+    from windowshop.pipeline import VideoSettings, make_video
+
+    base = VideoSettings()
+    budget = ({"train_seconds": None, "train_steps": args.iters} if args.iters else
+              {"train_seconds": args.seconds or base.train_seconds})
+    settings = replace(base, model=args.model, **budget, frames=args.frames, fps=args.fps,
+                       frame_size=args.size,
+                       prepare=replace(base.prepare, max_side=args.max_side, verbose=args.verbose))
+    make_video(args.input, args.out, settings, work_dir=args.work, device=pick_device(args.device))
+
+
 def cmd_serve(args: argparse.Namespace) -> None:
     from windowshop.service.app import serve
     from windowshop.service.settings import ServiceSettings
@@ -241,6 +256,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-masks", action="store_true", help="no foreground masks, even on a plain background")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier prepare in --out")
     p.set_defaults(func=cmd_prepare)
+
+    p = sub.add_parser("video", help="photos, a video or a posed scene -> a 360° turntable MP4",
+                       description="Chains prepare (skipped for a posed scene), fit and render with "
+                                   "defaults chosen for speed, printing each stage and its time.")
+    p.add_argument("input", help="a folder or zip of photos, a video, or a posed scene")
+    p.add_argument("--out", required=True, help="the MP4 to write (a poster JPEG goes beside it)")
+    p.add_argument("--work", default=None, help="folder for the posed scene and the run "
+                                                "(default: <out>_work beside the MP4)")
+    p.add_argument("--model", default="fast", help="registered model name (fast, nerf)")
+    budget = p.add_mutually_exclusive_group()
+    budget.add_argument("--seconds", type=float, default=None, help="training seconds (default 60)")
+    budget.add_argument("--iters", type=int, default=None, help="or training steps")
+    p.add_argument("--max-side", type=int, default=640, help="working resolution of the photos")
+    p.add_argument("--frames", type=int, default=60, help="turntable frames")
+    p.add_argument("--fps", type=float, default=30.0)
+    p.add_argument("--size", type=int, default=256, help="pixels a side of the turntable")
+    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
+    p.set_defaults(func=cmd_video)
 
     p = sub.add_parser("serve", help="the web service and page: upload photos, get a 360° video",
                        description="Flags override the WINDOWSHOP_* environment variables; every "

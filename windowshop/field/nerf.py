@@ -15,6 +15,8 @@ from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.composite import Composite, composite
 from windowshop.render.sampling import hierarchical, stratified
 
+POINT_CHUNK = 1 << 16  # field evaluations at once when rendering without gradients
+
 
 class NerfField(nn.Module):
     """The paper's MLP: D x W ReLU trunk with the encoded input concatenated again after layer
@@ -55,6 +57,15 @@ class NerfField(nn.Module):
         return sigma, torch.sigmoid(self.rgb_head(h))
 
 
+def _query(field: NerfField, points: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """`field` at `points`, `dirs` (P, 3); without autograd in slices of POINT_CHUNK points, so
+    rendering holds a few (POINT_CHUNK, W) activations at a time however many rays it is given."""
+    if torch.is_grad_enabled() or points.shape[0] <= POINT_CHUNK:
+        return field(points, dirs)
+    parts = [field(p, d) for p, d in zip(points.split(POINT_CHUNK), dirs.split(POINT_CHUNK))]
+    return torch.cat([sigma for sigma, _ in parts]), torch.cat([rgb for _, rgb in parts])
+
+
 class NerfModel(RadianceModel):
     """Coarse field on N_c stratified samples; with N_f > 0 a fine field on N_c + N_f samples."""
 
@@ -75,7 +86,7 @@ class NerfModel(RadianceModel):
         n = t.shape[1]
         points = origins[:, None, :] + t[..., None] * directions[:, None, :]  # (R, N, 3)
         dirs = directions[:, None, :].expand_as(points)
-        sigma, rgb = field(points.reshape(-1, 3), dirs.reshape(-1, 3))
+        sigma, rgb = _query(field, points.reshape(-1, 3), dirs.reshape(-1, 3))
         return composite(sigma.view(-1, n), rgb.view(-1, n, 3), t, far, background)
 
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,

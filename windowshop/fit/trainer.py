@@ -84,8 +84,8 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         group.setdefault("initial_lr", group["lr"])
     progress = _restore(model, optimizer, resume) if resume else Progress()
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
-    run = TrainingRun(model, optimizer, fit_config, scene_record(scene, scene_options or SceneOptions()),
-               out_dir, progress)
+    record = scene_record(scene, scene_options or SceneOptions())
+    run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress)
     write_config(out_dir, model_name, model_config, fit_config, run.record)
     bank = PixelBank(train_views, device, use_alpha=scene.background == "alpha")
     try:

@@ -25,6 +25,7 @@ BORDER = 0.04  # share of the image side that forms the border band sampled for 
 PLAIN_SPREAD = 40  # border pixels within this (0-255, max over channels) of its median ...
 PLAIN_SHARE = 0.9  # ... for at least this share of the band: a plain background
 PLAIN_VIEWS = 0.8  # masks are made when at least this share of the views has one
+HOLE_SHARE = 0.002  # holes in the mask smaller than this share of the image are filled
 FOREGROUND = 60  # pixels further than this from the background colour are the object's
 
 
@@ -95,7 +96,7 @@ def foreground_mask(pixels: np.ndarray, colour: np.ndarray, region: np.ndarray |
     """(H, W) bool: the object on a plain background of `colour` (3,), in `pixels` (H, W, 3).
 
     Pixels far from the background colour (inside `region`, if given), cleaned of specks, kept
-    as the large connected parts, holes filled and grown by a pixel so edges stay on the object.
+    as the large connected parts, small holes filled and grown by a pixel so edges stay on it.
     """
     mask = np.abs(pixels.astype(np.float32) - colour).max(-1) > FOREGROUND
     if region is not None:
@@ -105,7 +106,10 @@ def foreground_mask(pixels: np.ndarray, colour: np.ndarray, region: np.ndarray |
     if count:
         sizes = ndimage.sum(mask, labels, index=np.arange(1, count + 1))
         mask = np.isin(labels, 1 + np.flatnonzero(sizes >= 0.05 * sizes.max()))
-    mask = ndimage.binary_fill_holes(mask)
+    holes, count = ndimage.label(ndimage.binary_fill_holes(mask) & ~mask)
+    if count:  # small holes are dark or shiny parts of the object; large ones show the background
+        sizes = ndimage.sum(holes > 0, holes, index=np.arange(1, count + 1))
+        mask |= np.isin(holes, 1 + np.flatnonzero(sizes < HOLE_SHARE * mask.size))
     return ndimage.binary_dilation(mask, iterations=1)
 
 

@@ -92,11 +92,15 @@ def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSett
 
 def match(database: Path, settings: SfmSettings) -> None:
     """Match every pair (photos) or each frame with its neighbours in time (video)."""
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.ransac.random_seed = settings.seed
     if settings.matcher == "sequential":
         pycolmap.match_sequential(database, device=pycolmap.Device.cpu,
-                                  pairing_options=pycolmap.SequentialPairingOptions(overlap=10))
+                                  pairing_options=pycolmap.SequentialPairingOptions(overlap=10),
+                                  verification_options=verification)
     else:
-        pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
+        pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu,
+                                  verification_options=verification)
 
 
 def mapping_options(settings: SfmSettings, relaxed: bool) -> pycolmap.IncrementalPipelineOptions:

@@ -17,6 +17,8 @@ from windowshop.service.worker import job_dir
 
 # The pipeline's stage names, and the job states they put the job in.
 STAGE_STATES = {"prepare": "preparing", "fit": "training", "train": "training", "render": "rendering"}
+FRAME_NAME = "frame_{:04d}.jpg"  # per-frame images in result/frames, as the turntable writes them
+FRAME_GLOB = "frame_*.jpg"
 # Rough share of a job's time each stage takes, for the time-left estimate.
 STAGE_WEIGHTS = {"preparing": 0.3, "training": 0.55, "rendering": 0.15}
 
@@ -88,4 +90,30 @@ def pipeline_input(folder: Path) -> Path:
 
 def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
     """The worker's job function: run the pipeline on the job's input; returns the frame count."""
-    raise NotImplementedError  # replaced once windowshop.pipeline lands
+    import dataclasses
+
+    from windowshop.config import FitConfig, VideoOptions
+    from windowshop.device import pick_device
+    from windowshop.fit.trainer import fit
+    from windowshop.model import model_config
+    from windowshop.scene import load_scene
+    from windowshop.video.encode import VideoOutputs
+    from windowshop.video.turntable import render_run
+
+    folder = job_dir(settings, job_id)
+    work, result = reset_folders(folder)
+    report = ProgressReporter(JobStore(settings.db_path), job_id, run_token)
+    device = pick_device(settings.device)
+    scene = load_scene(pipeline_input(folder))
+    report("fit", 0.0)
+    fit(scene, settings.model or "fast", model_config(settings.model or "fast", None),
+        FitConfig(iters=settings.train_steps, seconds=settings.train_seconds), work / "run", device,
+        show_progress=False)
+    side = settings.frame_size
+    options = VideoOptions(frames=settings.frames, fps=settings.fps, width=side, height=side)
+    outputs = VideoOutputs(mp4=result / "video.mp4", poster=result / "poster.jpg",
+                           frames_dir=result / "frames", frames_format="jpg")
+    render_run(work / "run", options, outputs, device, progress=False,
+               on_frame=lambda k, n: report("render", k / n))
+    shutil.rmtree(work, ignore_errors=True)
+    return len(list((result / "frames").glob(FRAME_GLOB)))

@@ -19,6 +19,7 @@ from starlette.exceptions import HTTPException
 from starlette.formparsers import MultiPartException
 
 from windowshop.service.db import DONE, FINISHED, QUEUED, Job, JobStore
+from windowshop.service.jobs import FRAME_NAME
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.uploads import UploadRefused, check_upload, copy_limited
 from windowshop.service.worker import job_dir
@@ -213,7 +214,8 @@ def get_poster(request: Request, job_id: str) -> FileResponse:
 @router.get("/jobs/{job_id}/frames/{index}.jpg", response_class=FileResponse, responses=_REFUSALS,
             summary="Frame `index` of the turntable (for the drag-to-spin viewer)")
 def get_frame(request: Request, job_id: str, index: int) -> FileResponse:
-    return FileResponse(_result(request, job_id, f"frames/{index:04d}.jpg"), media_type="image/jpeg")
+    return FileResponse(_result(request, job_id, f"frames/{FRAME_NAME.format(index)}"),
+                        media_type="image/jpeg")
 
 
 @router.post("/jobs/{job_id}/cancel", response_model=JobStatus, responses=_REFUSALS,

@@ -146,8 +146,8 @@ def _expand(rows: list[dict], product: dict[str, list], where: str) -> list[dict
     for row in rows:
         for values in itertools.product(*product.values()):
             extra = dict(zip(product, values))
-            name = "-".join(n for n in (row.get("name"), _default_name(extra) if extra else None) if n)
-            expanded.append({**row, **extra, **({"name": name} if name else {})})
+            named = {"name": f"{row['name']}-{_default_name(extra)}"} if row.get("name") else {}
+            expanded.append({**row, **extra, **named})  # unnamed rows are named by all their switches
     return expanded
 
 

@@ -49,7 +49,7 @@ def write_results_csv(path: Path, grid: Grid, rows: list[ResultRow]) -> Path:
     extra = published_keys(rows)
     fields = (["index", "name", *grid.columns, "train_views", "test_views", "iterations",
                "train_seconds", "seconds_per_iter", "psnr", "ssim", "eval_seconds"]
-              + [f"published_{k}" for k in extra] + ["status", "folder"])
+              + [f"published_{k}" for k in extra] + ["status", "machine", "folder"])
     with open(path, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=fields)
         writer.writeheader()
@@ -152,17 +152,25 @@ def rank_correlation(a: list[float], b: list[float]) -> float | None:
     return float(np.corrcoef(*ranks)[0, 1])
 
 
+def machines_of(rows: list[ResultRow]) -> list[str]:
+    """The distinct machines the rows were finished on, in order of first appearance."""
+    return list(dict.fromkeys(row.machine or "unknown" for row in rows))
+
+
 def results_table(grid: Grid, rows: list[ResultRow]) -> list[str]:
     """The Markdown table: the combination's switches, our measurements, the published numbers."""
     extra = [k for k in published_keys(rows) if k in ("psnr", "ssim")]
+    machines = machines_of(rows)
     head = (["#", *[LABELS.get(k, k) for k in grid.columns], "Iterations", "PSNR", "SSIM",
-             "Train s", "s / iter"] + [f"{grid.reference or 'published'} {k.upper()}" for k in extra])
+             "Train s", "s / iter"] + [f"{grid.reference or 'published'} {k.upper()}" for k in extra]
+            + (["Machine"] if len(machines) > 1 else []))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
         cells = ([str(row.index), *[fmt(row.settings.get(k)) for k in grid.columns],
                   str(row.iterations), fmt(row.psnr), fmt(row.ssim, 3), fmt(row.train_seconds, 1),
                   fmt(row.seconds_per_iter, 3)]
-                 + [fmt(row.published.get(k), 2 if k == "psnr" else 3) for k in extra])
+                 + [fmt(row.published.get(k), 2 if k == "psnr" else 3) for k in extra]
+                 + ([f"M{machines.index(row.machine or 'unknown') + 1}"] if len(machines) > 1 else []))
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -189,8 +197,16 @@ def report_markdown(grid: Grid, rows: list[ResultRow], info: StudyInfo, files: d
     """The text of REPORT.md; `files` maps plot names to the images written (None: none)."""
     overrides = {k: v for k, v in info.overrides.items() if k not in ("iters", "seconds")}
     test_views = sorted({r.test_views for r in rows})
+    machines = machines_of(rows)
+    if len(machines) > 1:  # a study resumed elsewhere: say so, never mix timings silently
+        machine = "runs from several machines, see the table's last column: " + "; ".join(
+            f"M{i + 1} = {m}" for i, m in enumerate(machines))
+    else:
+        machine = machines[0] if machines else info.machine
     lines = [f"# Study `{grid.name}` on `{Path(info.scene).name}`", "", grid.description, "",
-             f"- Machine: {info.machine}; device `{info.device}`; torch {info.torch}",
+             f"- Machine: {machine}; device `{info.device}`; torch {info.torch}",
+             *([f"- Load average when this call started: {info.load:.1f} (other work on the "
+                f"machine slows the timings)"] if info.load is not None and info.device == "cpu" else []),
              f"- Budget: {info.budget}",
              f"- Set on every run: {', '.join(f'{k}={v}' for k, v in overrides.items()) or 'nothing'}",
              f"- Scene: `{info.scene}`; PSNR and SSIM are means over "

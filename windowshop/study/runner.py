@@ -6,7 +6,7 @@ takes only plain records, so a later scheduler can hand combinations to other pr
 
 A study folder holds `study.json`, `runs/NN-name/` (run folders `eval` and `render` accept, plus
 `study_row.json` once the combination is done and `study_view.png`, its render of one held-out
-view), `truth_view.png`, `results.csv`, `REPORT.md` and the plots.
+view), `truth_view.png` (that view's true image), `results.csv`, `REPORT.md` and the plots.
 """
 
 from __future__ import annotations
@@ -17,11 +17,12 @@ import functools
 import json
 import os
 import platform
+import types
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
 import torch
 from PIL import Image
 
@@ -72,6 +73,7 @@ class ResultRow:
     eval_seconds: float
     published: dict[str, float] = field(default_factory=dict)
     status: str = "trained"  # "trained", "resumed" or "skipped" (finished by an earlier call)
+    machine: str = ""  # `describe_machine` of the call that finished the run
 
 
 @dataclass(frozen=True)
@@ -87,38 +89,35 @@ class StudyInfo:
     torch: str
     started: str
     command: str = ""
+    load: float | None = None  # `load_average()` when the call started
 
 
-def _check_value(key: str, value: Any, default: Any, where: str) -> Any:
-    """`value` of switch `key` checked against the type of its `default`; ints become floats."""
-    def wrong(kind: str) -> UserError:
-        return UserError(f"{where}: switch {key} must be {kind}, got {value!r}")
-    if value is None or default is None:
-        return tuple(value) if isinstance(value, list) else value
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise wrong("true or false")
-    elif isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise wrong("an integer")
-    elif isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise wrong("a number")
-        return float(value)
-    elif isinstance(default, str) and not isinstance(value, str):
-        raise wrong("a string")
-    elif isinstance(default, tuple):
-        if not isinstance(value, (list, tuple)):
-            raise wrong("a list")
-        return tuple(value)
-    return value
+def _check_value(key: str, value: Any, hint: Any, where: str) -> Any:
+    """`value` of switch `key` checked against the field's type `hint`; ints become floats, lists
+    tuples."""
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    kinds = [typing.get_origin(k) or k for k in (typing.get_args(hint) if union else (hint,))]
+    if value is None:
+        if type(None) in kinds:
+            return None
+        raise UserError(f"{where}: switch {key} needs a value")
+    expected = next((k for k in (bool, int, float, str, tuple) if k in kinds), None)
+    ok = {bool: lambda v: isinstance(v, bool),
+          int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+          str: lambda v: isinstance(v, str), tuple: lambda v: isinstance(v, (list, tuple))}
+    if expected is not None and not ok[expected](value):
+        names = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
+                 tuple: "a list"}
+        raise UserError(f"{where}: switch {key} must be {names[expected]}, got {value!r}")
+    return float(value) if expected is float else tuple(value) if expected is tuple else value
 
 
-def _take(settings: dict[str, Any], defaults: Any, where: str) -> dict[str, Any]:
-    """Remove and return the switches that are fields of the dataclass instance `defaults`."""
-    names = [f.name for f in dataclasses.fields(defaults)]
-    return {key: _check_value(key, settings.pop(key), getattr(defaults, key), where)
-            for key in list(settings) if key in names}
+def _take(settings: dict[str, Any], cls: type, where: str) -> dict[str, Any]:
+    """Remove and return the switches that are fields of the dataclass `cls`, checked."""
+    hints = typing.get_type_hints(cls)
+    return {key: _check_value(key, settings.pop(key), hints[key], where)
+            for key in list(settings) if key in hints}
 
 
 def resolve(settings: dict[str, Any], where: str) -> RunSettings:
@@ -132,20 +131,21 @@ def resolve(settings: dict[str, Any], where: str) -> RunSettings:
     settings = dict(settings)
     model = str(settings.pop("model", DEFAULT_MODEL))
     preset = settings.pop("preset", None)
-    scene_options = SceneOptions(**_take(settings, SceneOptions(), where))
-    fit = _take(settings, FitConfig(), where)
+    scene_options = SceneOptions(**_take(settings, SceneOptions, where))
+    fit = _take(settings, FitConfig, where)
     if fit.get("seconds") is not None and "iters" not in fit:
         fit["iters"] = None  # a time budget alone replaces the default step budget, as in `fit`
     fit_config = FitConfig(**fit)
     if not fit_config.iters and not fit_config.seconds:
         raise UserError(f"{where}: no training budget; give iters or seconds (or --iters/--seconds)")
     try:
-        cls = model_class(model)
-        base = cls.presets[preset] if preset in cls.presets else next(iter(cls.presets.values()))
-        checked = {key: _check_value(key, value, getattr(base, key, None), where)
-                   for key, value in settings.items()}
-        model_config = build_model_config(model, preset, checked)
-    except (UserError, ValueError) as err:
+        config_type = model_class(model).config_type
+    except ValueError as err:
+        raise UserError(f"{where}: {err}") from None
+    checked = _take(settings, config_type, where)
+    try:
+        model_config = build_model_config(model, preset, {**settings, **checked})
+    except UserError as err:  # a switch no part of `fit` has, or an unknown preset
         raise UserError(f"{where}: {err}") from None
     return RunSettings(model, preset, model_config, fit_config, scene_options)
 
@@ -168,6 +168,11 @@ def describe_machine(device: torch.device | str) -> str:
         return f"GPU {torch.cuda.get_device_name(device)} (CUDA {torch.version.cuda})"
     return (f"CPU {cpu_model()} ({os.cpu_count()} logical cores, "
             f"{torch.get_num_threads()} torch threads)")
+
+
+def load_average() -> float | None:
+    """The machine's 1-minute load average (None where the OS has none): other work slows timings."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else None
 
 
 def describe_budget(overrides: dict[str, Any], grid: Grid) -> str:
@@ -233,33 +238,27 @@ def run_state(run_dir: Path, spec: RunSettings, scene_path: str) -> str:
     return "partial" if (run_dir / CHECKPOINT).is_file() else "new"
 
 
-def save_image(image: np.ndarray, path: Path) -> Path:
-    """Write an (H, W, 3) float image in [0, 1] as an 8-bit PNG."""
-    Image.fromarray((np.clip(image, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)).save(path)
-    return path
+def _keep_view(run_dir: Path, view_index: int, study_dir: Path) -> None:
+    """Copy the run's render of held-out view `view_index` to `study_view.png` (and the true
+    image to the study's `truth_view.png` once), for the contact sheet.
 
+    Both are cut from the comparison image evaluation wrote (truth | render | error, see
+    `evaluate.comparison_image`), so the view is not rendered a second time.
+    """
+    from windowshop.fit.evaluate import EVAL_DIR
 
-def _render_view(run_dir: Path, scene, view_index: int, device, study_dir: Path) -> None:
-    """Render held-out view `view_index` with the run's model into `study_view.png` (and the
-    true image into the study's `truth_view.png` once), for the contact sheet."""
-    from windowshop.fit.checkpoint import load_run
-    from windowshop.fit.evaluate import held_out_views, target_image
-    from windowshop.render.frames import display_background, render_camera
-
-    views = held_out_views(scene)
-    if not views:
-        return
-    view = views[min(view_index, len(views) - 1)]
-    run = load_run(run_dir, device)
-    frame = render_camera(run.model, view.camera, display_background(run.background),
-                          run.fit_config.eval_chunk)
-    save_image(frame.rgb, run_dir / VIEW)
+    found = sorted((run_dir / EVAL_DIR).glob(f"{view_index:03d}_*.png"))
+    if not found:
+        return  # a scene without held-out views: no contact tile
+    panel = Image.open(found[0]).convert("RGB")
+    width = panel.width // 3
+    panel.crop((width, 0, 2 * width, panel.height)).save(run_dir / VIEW)
     if not (study_dir / TRUTH).is_file():
-        save_image(target_image(view, scene.background), study_dir / TRUTH)
+        panel.crop((0, 0, width, panel.height)).save(study_dir / TRUTH)
 
 
 def _result_row(combo: Combination, spec: RunSettings, metrics: dict, train_views: int,
-                status: str) -> ResultRow:
+                status: str, machine: str) -> ResultRow:
     iterations = int(metrics.get("iterations") or 0)
     seconds = float(metrics.get("train_seconds") or 0.0)
     settings = {**spec.effective(), "views": train_views}
@@ -269,7 +268,7 @@ def _result_row(combo: Combination, spec: RunSettings, metrics: dict, train_view
                      train_seconds=seconds, seconds_per_iter=seconds / max(iterations, 1),
                      psnr=metrics.get("psnr"), ssim=metrics.get("ssim"),
                      eval_seconds=float(metrics.get("eval_seconds") or 0.0),
-                     published=dict(combo.published), status=status)
+                     published=dict(combo.published), status=status, machine=machine)
 
 
 def run_combination(combo: Combination, scene_path: str | Path, study_dir: str | Path,
@@ -289,7 +288,9 @@ def run_combination(combo: Combination, scene_path: str | Path, study_dir: str |
     spec = resolve(combo.settings, combo.folder)
     state = run_state(run_dir, spec, scene_path)
     if state == "done":
-        return ResultRow(**{**json.loads((run_dir / ROW).read_text()), "status": "skipped"})
+        recorded = json.loads((run_dir / ROW).read_text())
+        names = {f.name for f in dataclasses.fields(ResultRow)}
+        return ResultRow(**{**{k: v for k, v in recorded.items() if k in names}, "status": "skipped"})
     scene = _scene(scene_path, spec.scene_options)
     if state == "trained":
         metrics = json.loads((run_dir / METRICS).read_text())
@@ -299,9 +300,10 @@ def run_combination(combo: Combination, scene_path: str | Path, study_dir: str |
         metrics = fit(scene, spec.model, spec.model_config, spec.fit_config, run_dir, device,
                       scene_options=spec.scene_options,
                       resume=run_dir if state == "partial" else None, show_progress=show_progress)
-    _render_view(run_dir, scene, view_index, device, study_dir)
+    _keep_view(run_dir, view_index, study_dir)
     row = _result_row(combo, spec, metrics, len(scene.split("train")),
-                      "resumed" if state in ("partial", "trained") else "trained")
+                      "resumed" if state in ("partial", "trained") else "trained",
+                      describe_machine(device))
     (run_dir / ROW).write_text(json.dumps(dataclasses.asdict(row), indent=2) + "\n")
     return row
 
@@ -311,7 +313,7 @@ def study_info(grid: Grid, scene_path: str | Path, overrides: dict[str, Any],
     """The StudyInfo of a study starting now on `device`."""
     return StudyInfo(grid=grid.name, scene=str(scene_path), budget=describe_budget(overrides, grid),
                      overrides=dict(overrides), machine=describe_machine(device), device=str(device),
-                     torch=torch.__version__, command=command,
+                     torch=torch.__version__, command=command, load=load_average(),
                      started=datetime.datetime.now().isoformat(timespec="seconds"))
 
 
@@ -344,5 +346,6 @@ def run_study(grid: Grid, scene_path: str | Path, out_dir: str | Path, device: t
         log(f"study {grid.name}: combination {combo.index}/{len(grid.combinations)} {combo.folder}")
         rows.append(run_combination(combo, scene_path, out_dir, device, show_progress))
         log(row_summary(rows[-1]))
-        write_report(out_dir, grid, rows, info)
+        if rows[-1].status != "skipped" or len(rows) == len(grid.combinations):
+            write_report(out_dir, grid, rows, info)  # after every new result, so a stop loses none
     return rows

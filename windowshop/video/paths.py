@@ -91,8 +91,8 @@ def vertical_fov(camera: Camera) -> float:
 def fit_orbit(cameras: list[Camera]) -> Orbit:
     """The orbit of the training `cameras`: their centre, up axis and median radius/elevation.
 
-    The field of view is the median of each camera's narrower one, so whatever the photos kept in
-    frame stays in frame.
+    `fov` is the median of each camera's narrower field of view; the turntable gives it to its own
+    narrower side, so whatever the photos kept in frame stays in frame.
     """
     if not cameras:
         raise UserError("the run has no training cameras to fit a turntable orbit to")
@@ -145,6 +145,13 @@ def spiral_elevations(elevation: float, amplitude: float, frames: int) -> np.nda
     return elevation + amplitude * np.sin(2 * np.pi * np.arange(frames) / frames)
 
 
+def _vertical_fov_for(fov: float, width: int, height: int) -> float:
+    """Vertical field of view (degrees) that gives the narrower side of the image `fov` degrees."""
+    if width >= height:
+        return fov
+    return math.degrees(2 * math.atan(math.tan(math.radians(fov) / 2) * height / width))
+
+
 def parse_size(text: str) -> tuple[int, int]:
     """"256" (square) or "320x240" (width x height) as (width, height)."""
     parts = str(text).lower().split("x")
@@ -171,7 +178,7 @@ def turntable_path(train_cameras: list[Camera], options: VideoOptions) -> list[C
     orbit = Orbit(centre=orbit.centre, up=orbit.up, reference=orbit.reference,
                   radius=options.radius or orbit.radius,
                   elevation=orbit.elevation if options.elevation is None else options.elevation,
-                  fov=options.fov or orbit.fov)
+                  fov=options.fov or _vertical_fov_for(orbit.fov, options.width, options.height))
     elevations = None
     if options.path == "spiral":
         elevations = spiral_elevations(orbit.elevation, options.spiral_amplitude, options.frames)

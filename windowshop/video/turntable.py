@@ -17,6 +17,7 @@ import torch
 from tqdm import tqdm
 
 from windowshop.config import VideoOptions
+from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
 from windowshop.scene.types import Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
@@ -63,6 +64,8 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
     """
     from windowshop.render.frames import render_camera
 
+    if not cameras:
+        raise UserError("the camera path is empty: nothing to render")
     width, height = cameras[0].width, cameras[0].height
     if any((c.width, c.height) != (width, height) for c in cameras):
         raise ValueError("every camera of a video must have the same image size")

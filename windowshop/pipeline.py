@@ -1,0 +1,174 @@
+"""`windowshop video`: photos, a video or a posed scene -> a 360° turntable MP4, in one call.
+
+    make_video(input, "spin.mp4")  =  prepare (unless the input is already posed)
+                                   -> fit (the fast model, a short budget)
+                                   -> render (an orbit turntable, poster, optional frames)
+
+The CLI and the web service both call `make_video`; it reports progress through
+`on_stage(stage, fraction)` with stage "prepare", "fit" or "render" and fraction in [0, 1].
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from windowshop.config import FitConfig, PrepareOptions, SceneOptions, VideoOptions
+from windowshop.errors import UserError
+from windowshop.photos.progress import StageCallback
+
+MARKER = "video.json"  # the summary a work folder of make_video holds (and may be replaced by)
+
+
+@dataclass(frozen=True)
+class VideoSettings:
+    """The defaults of `windowshop video`, chosen for speed on a CPU."""
+
+    model: str = "fast"
+    preset: str | None = None
+    train_seconds: float | None = 60.0  # training budget (None: train_steps only)
+    train_steps: int | None = None
+    train_side: int = 320  # longer side of the training images, pixels
+    frames: int = 60
+    fps: float = 30.0
+    frame_size: int = 256  # the turntable is frame_size x frame_size
+    prepare: PrepareOptions = field(default_factory=PrepareOptions)
+
+
+@dataclass
+class VideoResult:
+    mp4: Path
+    poster: Path | None
+    scene_dir: Path
+    run_dir: Path
+    seconds: dict[str, float]  # stage -> seconds
+    metrics: dict  # the fit's held-out metrics
+
+
+def is_posed_scene(path: Path) -> bool:
+    """True when `path` is a scene with camera poses that `load_scene` reads."""
+    from windowshop.scene import detect_format
+
+    try:
+        detect_format(path)
+    except UserError:
+        return False
+    return True
+
+
+def _fit_fraction(line: str, config: FitConfig) -> float:
+    stats = json.loads(line)
+    parts = [stats["step"] / config.iters if config.iters else 0.0,
+             stats["elapsed"] / config.seconds if config.seconds else 0.0]
+    return min(max(parts), 1.0)
+
+
+@contextmanager
+def _watch_fit(log: Path, config: FitConfig, on_stage: StageCallback | None) -> Iterator[None]:
+    """Report the fit's progress from its log.jsonl (the trainer takes no callback) every 0.5 s,
+    from a helper thread."""
+    stop = threading.Event()
+
+    def poll() -> None:
+        while not stop.wait(0.5):
+            lines = log.read_text().splitlines() if log.is_file() else []
+            if lines and on_stage is not None:
+                try:
+                    on_stage("fit", _fit_fraction(lines[-1], config))
+                except ValueError:  # a line being written
+                    pass
+
+    thread = threading.Thread(target=poll, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
+def _work_dir(work: Path) -> Path:
+    """An empty work folder; an earlier make_video's (holding MARKER) is replaced."""
+    if work.exists() and any(work.iterdir()):
+        if not (work / MARKER).is_file():
+            raise UserError(f"{work}: the work folder exists and is not from `windowshop video`; "
+                            f"choose another --work folder")
+        shutil.rmtree(work)
+    work.mkdir(parents=True, exist_ok=True)
+    (work / MARKER).write_text("{}")
+    return work
+
+
+def make_video(source: str | Path, out_mp4: str | Path, settings: VideoSettings = VideoSettings(),
+               work_dir: str | Path | None = None, device: torch.device | str = "cpu",
+               poster: bool | str = True, frames_dir: str | Path | None = None,
+               on_stage: StageCallback | None = None, show: bool = True) -> VideoResult:
+    """Photos (folder or zip), a video, or a posed scene at `source` -> the turntable `out_mp4`.
+
+    `work_dir` (default: `<out stem>_work` beside the MP4) keeps the posed scene (`scene/`) and
+    the trained run (`run/`). `poster` writes the first frame beside the MP4 (True) or to a path;
+    `frames_dir` also writes every frame as a JPEG there. `on_stage(stage, fraction)` is called
+    with stage "prepare" (skipped for a posed scene), "fit" and "render" as each advances (during
+    the fit from a helper thread). Prints each stage and its time when `show`.
+    """
+    from windowshop.fit.trainer import fit
+    from windowshop.model import model_config
+    from windowshop.photos.prepare import prepare
+    from windowshop.scene import load_scene
+    from windowshop.video.turntable import default_outputs, render_run
+
+    source, out_mp4 = Path(source), Path(out_mp4)
+    if not source.exists():
+        raise UserError(f"{source}: no such file or folder")
+    work = _work_dir(Path(work_dir) if work_dir else out_mp4.with_name(f"{out_mp4.stem}_work"))
+    out_mp4.parent.mkdir(parents=True, exist_ok=True)
+    report = on_stage or (lambda stage, fraction: None)
+    seconds: dict[str, float] = {}
+
+    def done(stage: str, start: float) -> None:
+        seconds[stage] = time.perf_counter() - start
+        report(stage, 1.0)
+        if show:
+            print(f"{stage}: {seconds[stage]:.1f} s", file=sys.stderr)
+
+    start = time.perf_counter()
+    scene_dir = source
+    if not is_posed_scene(source):
+        scene_dir = prepare(source, work / "scene", settings.prepare, on_stage, show).out_dir
+        done("prepare", start)
+
+    start = time.perf_counter()
+    report("fit", 0.0)
+    scene = load_scene(scene_dir, SceneOptions(max_side=settings.train_side))
+    budget = FitConfig(iters=settings.train_steps, seconds=settings.train_seconds, log_every=10,
+                       checkpoint_every=10**9)
+    with _watch_fit(work / "run" / "log.jsonl", budget, on_stage):
+        metrics = fit(scene, settings.model, model_config(settings.model, settings.preset), budget,
+                      work / "run", device, show_progress=show)
+    done("fit", start)
+
+    start = time.perf_counter()
+    report("render", 0.0)
+    options = VideoOptions(frames=settings.frames, fps=settings.fps, width=settings.frame_size,
+                           height=settings.frame_size)
+    outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, frames_format="jpg")
+    render_run(work / "run", options, outputs, device, progress=show,
+               on_frame=lambda k, n: report("render", k / n))
+    done("render", start)
+
+    result = VideoResult(mp4=out_mp4, poster=outputs.poster, scene_dir=Path(scene_dir),
+                         run_dir=work / "run", seconds=seconds, metrics=metrics)
+    (work / MARKER).write_text(json.dumps({**asdict(result), "settings": asdict(settings)},
+                                          indent=2, default=str))
+    if show:
+        print(f"wrote {out_mp4} in {sum(seconds.values()):.0f} s", file=sys.stderr)
+    return result

@@ -19,9 +19,9 @@ import httpx
 # Service settings that make a job take seconds: few training steps, few small frames.
 FAST_JOB = {
     "WINDOWSHOP_MODEL": "fast",
-    "WINDOWSHOP_TRAIN_STEPS": "150",
-    "WINDOWSHOP_FRAMES": "12",
-    "WINDOWSHOP_FRAME_SIZE": "64",
+    "WINDOWSHOP_TRAIN_SECONDS": "4",
+    "WINDOWSHOP_FRAMES": "8",
+    "WINDOWSHOP_FRAME_SIZE": "48",
     "WINDOWSHOP_FPS": "12",
     "WINDOWSHOP_DEVICE": "cpu",
     "WINDOWSHOP_POLL_SECONDS": "0.2",

@@ -8,6 +8,7 @@ desktop and on a phone-sized screen are kept in test-artifacts/.
 from __future__ import annotations
 
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -40,6 +41,15 @@ def browser():
         browser.close()
 
 
+def wait_js(page, expression: str, timeout: float = 30.0) -> None:
+    """Poll `expression` until true (page.wait_for_function would eval() in the page, which the
+    page's Content-Security-Policy rightly forbids)."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"never true: {expression}"
+        time.sleep(0.1)
+
+
 def wait_until_done(page, timeout_ms: int = 240_000) -> None:
     page.wait_for_selector("#job-state[data-state=done], #job-state[data-state=failed]",
                            timeout=timeout_ms)
@@ -60,7 +70,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     page.wait_for_selector("#stages li[data-status=running]")  # a stage and its bar show up
     wait_until_done(page)
 
-    page.wait_for_function("document.getElementById('video').currentTime > 0.1")
+    wait_js(page, "document.getElementById('video').currentTime > 0.1")
     start = page.evaluate("document.getElementById('video').currentTime")
     page.wait_for_timeout(600)
     playing = page.evaluate("(() => { const v = document.getElementById('video');"
@@ -68,7 +78,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     assert playing["t"] != start and not playing["paused"] and playing["loop"]
 
     spin = page.locator("#spin")
-    page.wait_for_function("document.getElementById('spin-img').complete"
+    wait_js(page, "document.getElementById('spin-img').complete"
                            " && document.getElementById('spin-img').naturalWidth > 0")
     before = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
     box = spin.bounding_box()
@@ -78,7 +88,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     for step in range(1, 11):
         page.mouse.move(box["x"] + box["width"] * (0.3 + 0.03 * step), y)
     page.mouse.up()
-    page.wait_for_function("document.getElementById('spin-img').complete")
+    wait_js(page, "document.getElementById('spin-img').complete")
     after = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
     assert after[0] != before[0] and after[1] != before[1]
     assert after[2] != before[2]  # the picture itself changed, not only the attribute
@@ -93,7 +103,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     page = phone.new_page()
     page.goto(f"{service.url}/jobs/{job_id}")  # the share link, opened elsewhere
     wait_until_done(page)
-    page.wait_for_function("document.getElementById('video').currentTime > 0.1")
+    wait_js(page, "document.getElementById('video').currentTime > 0.1")
     width = page.evaluate("document.documentElement.scrollWidth")
     assert width <= 390, "the page scrolls sideways on a phone"
     page.screenshot(path=str(ARTIFACTS / "e2e-phone.png"), full_page=True)

@@ -13,9 +13,9 @@ from PIL import Image
 from windowshop.cli import main
 from windowshop.config import FitConfig, NerfConfig, SceneOptions
 from windowshop.errors import UserError
-from windowshop.study.grids import SEED, budget_overrides, load_grid, parse_assignments
-from windowshop.study.report import rank_correlation
-from windowshop.study.runner import cpu_model, resolve
+from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
+from windowshop.study.report import rank_correlation, report_markdown
+from windowshop.study.runner import ResultRow, cpu_model, resolve, study_info
 
 LEGO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lego_tiny.npz"
 needs_lego = pytest.mark.skipif(not LEGO.is_file(), reason="needs ../shared/data/lego_tiny.npz")
@@ -81,7 +81,8 @@ def test_grid_file_rows_product_and_errors(tmp_path):
     fast = tmp_path / "fast.json"
     fast.write_text(json.dumps({"rows": [{"model": "fast", "voxels": 32**3, "iters": 5}]}))
     assert resolve(load_grid(path=fast).combinations[0].settings, "x").model_config.voxels == 32**3
-    for bad, message in [({"frequencies": 3}, "01.*--frequencies"), ({"voxels": "many"}, "voxels must be an integer"),
+    for bad, message in [({"frequencies": 3}, "01.*--frequencies"),
+                         ({"voxels": "many"}, "voxels must be an integer"),
                          ({"views": "all"}, "views"), ({"model": "nope"}, "unknown model")]:
         combo = load_grid(path=fast, overrides=bad).combinations[0]
         with pytest.raises(UserError, match=message):
@@ -95,6 +96,27 @@ def test_rank_correlation_known_answers():
     assert rank_correlation([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert rank_correlation([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
     assert rank_correlation([1, 2], [1, 2]) is None
+
+
+def test_report_never_mixes_machines_silently():
+    grid = load_grid("seed", overrides=budget_overrides(5, None))
+
+    def row(combo, machine, load):
+        return ResultRow(index=combo.index, name=combo.name, folder=f"runs/{combo.folder}",
+                         settings=resolve(combo.settings, "").effective(), train_views=100,
+                         test_views=6, iterations=5, train_seconds=1.0, seconds_per_iter=0.2,
+                         psnr=20.0, ssim=0.8, eval_seconds=0.1, published=combo.published,
+                         machine=machine, load=load, finished=f"2026-01-0{combo.index}T00:00:00")
+
+    first, second = grid.combinations[:2]
+    info = study_info(grid, "lego_tiny.npz", {"iters": 5}, "cpu")
+    text = report_markdown(grid, [row(first, "CPU X", 3.0), row(second, "GPU Y", None)], info, {})
+    assert "M1 = CPU X; M2 = GPU Y" in text
+    assert "load average of the machine when the runs started: 3.0" in text.lower()
+    table = [line for line in text.splitlines() if line.startswith("| ") and line[2].isdigit()]
+    assert [line.rstrip(" |").split("| ")[-1] for line in table] == ["M1", "M2"]
+    single = report_markdown(grid, [row(first, "CPU X", 3.0)], info, {})
+    assert "Machine: CPU X;" in single and "| M1" not in single
 
 
 def run_cli_study(out: Path, *extra: str) -> int:

@@ -68,7 +68,10 @@ def _add_nerf_flags(p: argparse.ArgumentParser) -> list[str]:
                    help="colour depends on the viewing direction")
     g.add_argument("--encoding-pi", action=argparse.BooleanOptionalAction, default=None,
                    help="sin(2^k pi p) as the paper's formula instead of its code's sin(2^k p)")
-    return [f[0][2:].replace("-", "_") for f in flags] + ["view_dependent", "encoding_pi"]
+    g.add_argument("--density-activation", choices=["relu", "softplus"], default=None,
+                   help="relu as the paper; softplus cannot get stuck at zero density")
+    return [f[0][2:].replace("-", "_") for f in flags] + ["view_dependent", "encoding_pi",
+                                                          "density_activation"]
 
 
 def cmd_fit(args: argparse.Namespace) -> None:

@@ -36,6 +36,7 @@ class NerfConfig:
     depth: int = 8  # D: layers of the trunk
     width: int = 256  # W: their width
     skip: int = 5  # the encoded input is concatenated again after this many layers (0: never)
+    density_activation: str = "relu"  # the paper's; "softplus" never stops the gradient (no dead start)
     n_coarse: int = 64  # N_c: stratified samples per ray
     n_fine: int = 128  # N_f: inverse-CDF samples per ray for a separate fine network (0: one network)
     near: float | None = None
@@ -70,7 +71,7 @@ class FastConfig:
     lr_final: float = 0.1  # learning rates decay exponentially to this factor
     occupancy_warmup: int = 64  # steps before empty cells are first skipped
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
-    occupancy_alpha: float = 1e-3  # a cell is skipped when no corner reaches this opacity per step
+    occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
     weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
     tv_density: float = 0.0  # total-variation weight on the density grid at the samples
     tv_features: float = 0.0  # ... and on the feature grid

@@ -63,8 +63,8 @@ class FastModel(RadianceModel):
         final_voxel = float(torch.prod(self.extent) / config.voxels) ** (1.0 / 3.0)
         self.density_scale = 1.0 / final_voxel  # softplus units are "per final voxel"
         # initial opacity alpha_init over one final-resolution step (config.step voxels)
-        sigma0 = -math.log(1.0 - config.alpha_init) / config.step
-        self.shift = math.log(math.expm1(sigma0))
+        self.shift = 0.0
+        self.shift = self._raw_at_alpha(config.alpha_init)
         self.density = DenseGrid(shape, 1, aabb)
         self.features = DenseGrid(shape, config.features, aabb)
         self.occupancy = OccupancyGrid(tuple(s - 1 for s in shape), aabb)
@@ -73,6 +73,11 @@ class FastModel(RadianceModel):
                                  nn.Linear(config.hidden, 3))
 
     # --- geometry -------------------------------------------------------------------------------
+    def _raw_at_alpha(self, alpha: float) -> float:
+        """The raw grid value whose density has opacity `alpha` over one final-resolution step."""
+        softplus = -math.log(1.0 - alpha) / self.config.step
+        return math.log(math.expm1(softplus)) - self.shift
+
     @property
     def step_length(self) -> float:
         """Marching step in world units for the current grid."""
@@ -148,7 +153,5 @@ class FastModel(RadianceModel):
     @torch.no_grad()
     def refresh_occupancy(self) -> None:
         """Skip the cells where no corner reaches `occupancy_alpha` over one step."""
-        alpha = self.config.occupancy_alpha
-        sigma = -math.log(1.0 - alpha) / self.step_length / self.density_scale
-        raw = math.log(math.expm1(sigma)) - self.shift  # softplus is monotone: threshold raw values
+        raw = self._raw_at_alpha(self.config.occupancy_alpha)
         self.occupancy.set_from_vertices(self.density.vertex_values()[0], raw)

@@ -16,17 +16,23 @@ from windowshop.render.composite import Composite, composite
 from windowshop.render.sampling import hierarchical, stratified
 
 POINT_CHUNK = 1 << 16  # field evaluations at once when rendering without gradients
+# raw output -> density >= 0. ReLU as the paper; a field whose densities all go negative early
+# (a dark background makes "nothing anywhere" a strong pull) stops learning, softplus cannot.
+DENSITY_ACTIVATIONS = {"relu": torch.relu, "softplus": torch.nn.functional.softplus}
 
 
 class NerfField(nn.Module):
     """The paper's MLP: D x W ReLU trunk with the encoded input concatenated again after layer
-    `skip`, a density head, and a one-layer (W/2) colour branch that sees the encoded direction
-    when view dependence is on (off: colour and density from one linear head on the trunk, as
-    the reference code)."""
+    `skip`, a density head (ReLU or softplus), and a one-layer (W/2) colour branch that sees the
+    encoded direction when view dependence is on (off: colour and density from one linear head on
+    the trunk, as the reference code)."""
 
     def __init__(self, config: NerfConfig):
         super().__init__()
+        if config.density_activation not in DENSITY_ACTIVATIONS:
+            raise ValueError(f"density_activation must be one of {', '.join(DENSITY_ACTIVATIONS)}")
         self.config = config
+        self.density = DENSITY_ACTIVATIONS[config.density_activation]
         self.encode_pos = PositionalEncoding(3, config.freqs, config.encoding_pi)
         self.encode_dir = PositionalEncoding(3, config.freqs_dir, config.encoding_pi)
         width, n_in = config.width, self.encode_pos.out_dims
@@ -51,8 +57,8 @@ class NerfField(nn.Module):
             h = torch.relu(layer(h))
         if not self.config.view_dependent:
             raw = self.head(h)
-            return torch.relu(raw[:, 3]), torch.sigmoid(raw[:, :3])
-        sigma = torch.relu(self.sigma_head(h)[:, 0])
+            return self.density(raw[:, 3]), torch.sigmoid(raw[:, :3])
+        sigma = self.density(self.sigma_head(h)[:, 0])
         h = torch.relu(self.view(torch.cat([self.feature(h), self.encode_dir(d)], dim=-1)))
         return sigma, torch.sigmoid(self.rgb_head(h))
 

@@ -7,6 +7,7 @@ when the job ends) and `result/` (video.mp4, poster.jpg, frames/0000.jpg ...), w
 from __future__ import annotations
 
 import shutil
+import threading
 import time
 from pathlib import Path
 
@@ -39,8 +40,13 @@ class ProgressReporter:
         self.stages: dict[str, float] = {}
         self.state: str | None = None
         self._last_write = float("-inf")
+        self._lock = threading.Lock()
 
     def __call__(self, stage: str, fraction: float) -> None:
+        with self._lock:  # the pipeline reports the fit's progress from a helper thread
+            self._record(stage, fraction)
+
+    def _record(self, stage: str, fraction: float) -> None:
         state = STAGE_STATES.get(stage, stage)
         if state not in RUNNING:
             return
@@ -88,32 +94,28 @@ def pipeline_input(folder: Path) -> Path:
     return folder / "input"
 
 
-def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
-    """The worker's job function: run the pipeline on the job's input; returns the frame count."""
-    import dataclasses
+def video_settings(settings: ServiceSettings):
+    """The pipeline's settings: its own defaults, with the knobs the service sets."""
+    from windowshop.pipeline import VideoSettings
 
-    from windowshop.config import FitConfig, VideoOptions
+    knobs = {"model": settings.model, "preset": settings.preset, "frames": settings.frames,
+             "fps": settings.fps, "frame_size": settings.frame_size, "train_side": settings.train_side}
+    knobs = {k: v for k, v in knobs.items() if v is not None}
+    if settings.train_seconds is not None or settings.train_steps is not None:  # one replaces both
+        knobs.update(train_seconds=settings.train_seconds, train_steps=settings.train_steps)
+    return VideoSettings(**knobs)
+
+
+def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
+    """The worker's job function: the pipeline on the job's input; returns the frame count."""
     from windowshop.device import pick_device
-    from windowshop.fit.trainer import fit
-    from windowshop.model import model_config
-    from windowshop.scene import load_scene
-    from windowshop.video.encode import VideoOutputs
-    from windowshop.video.turntable import render_run
+    from windowshop.pipeline import make_video
 
     folder = job_dir(settings, job_id)
     work, result = reset_folders(folder)
     report = ProgressReporter(JobStore(settings.db_path), job_id, run_token)
-    device = pick_device(settings.device)
-    scene = load_scene(pipeline_input(folder))
-    report("fit", 0.0)
-    fit(scene, settings.model or "fast", model_config(settings.model or "fast", None),
-        FitConfig(iters=settings.train_steps, seconds=settings.train_seconds), work / "run", device,
-        show_progress=False)
-    side = settings.frame_size
-    options = VideoOptions(frames=settings.frames, fps=settings.fps, width=side, height=side)
-    outputs = VideoOutputs(mp4=result / "video.mp4", poster=result / "poster.jpg",
-                           frames_dir=result / "frames", frames_format="jpg")
-    render_run(work / "run", options, outputs, device, progress=False,
-               on_frame=lambda k, n: report("render", k / n))
-    shutil.rmtree(work, ignore_errors=True)
+    make_video(pipeline_input(folder), result / "video.mp4", video_settings(settings), work_dir=work,
+               device=pick_device(settings.device), poster=str(result / "poster.jpg"),
+               frames_dir=result / "frames", on_stage=report, show=False)
+    shutil.rmtree(work, ignore_errors=True)  # the scene and the trained run: not served, and large
     return len(list((result / "frames").glob(FRAME_GLOB)))

@@ -36,14 +36,15 @@ class ServiceSettings(BaseSettings):
     poll_seconds: float = 0.5  # how often the worker looks at the queue and at cancellations
     device: str | None = None  # torch device of the jobs; None picks CUDA when present
 
-    # The job: knobs passed on to windowshop.pipeline.make_video (None keeps the pipeline's default).
+    # The job: knobs of windowshop.pipeline.VideoSettings; None keeps the pipeline's default.
     model: str | None = None  # "fast" or "nerf"
+    preset: str | None = None  # a named setting of the model
     train_seconds: float | None = None  # training time budget
-    train_steps: int | None = None  # or a number of training steps
-    frames: int = 60  # turntable frames, also the images of the drag-to-spin viewer
-    fps: int = 30
-    frame_size: int = 256  # pixels of the longer side of the video and the frames
-    work_side: int | None = None  # resize photos so the longer side is at most this
+    train_steps: int | None = None  # or a number of training steps (either one replaces both)
+    train_side: int | None = None  # longer side of the training images, pixels
+    frames: int | None = None  # turntable frames, also the images of the drag-to-spin viewer
+    fps: float | None = None
+    frame_size: int | None = None  # the turntable is frame_size x frame_size pixels
 
     @property
     def db_path(self) -> Path:

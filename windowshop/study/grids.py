@@ -176,8 +176,10 @@ def grid_from_dict(data: dict, where: str, overrides: dict[str, Any] | None = No
         columns += [key for key in row if key not in columns and key not in BUDGET_KEYS]
         combinations.append(Combination(index=index, name=name, settings={**base, **row, **overrides},
                                         published={k: float(v) for k, v in published.items()}))
-    columns.sort(key=lambda key: LEADING_COLUMNS.index(key) if key in LEADING_COLUMNS else len(LEADING_COLUMNS))
-    return Grid(name=str(data.get("name") or Path(where).stem), description=str(data.get("description", "")),
+    lead = {key: i for i, key in enumerate(LEADING_COLUMNS)}
+    columns.sort(key=lambda key: lead.get(key, len(lead)))
+    return Grid(name=str(data.get("name") or Path(where).stem),
+                description=str(data.get("description", "")),
                 reference=str(data.get("reference", "")), combinations=tuple(combinations),
                 columns=tuple(columns))
 

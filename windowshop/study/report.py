@@ -68,8 +68,10 @@ def _group(row: ResultRow, grid: Grid) -> str:
 
 
 def _scatter(rows: list[ResultRow], grid: Grid, x_of, xlabel: str, path: Path,
-             log_x: bool = False, published_x: bool = False) -> Path:
-    """PSNR of `rows` against `x_of(row)`, one colour per group, index labels, published hollow."""
+             log_x: bool = False, lines: bool = False) -> Path:
+    """PSNR of `rows` against `x_of(row)`, one colour per group, labelled by index. With `lines`
+    (for an x the paper shares, the number of images) each group's points are joined and the
+    published PSNR is drawn hollow at the same x."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -81,14 +83,14 @@ def _scatter(rows: list[ResultRow], grid: Grid, x_of, xlabel: str, path: Path,
     for g, name in enumerate(groups):
         members = sorted((r for r in rows if _group(r, grid) == name and r.psnr is not None), key=x_of)
         xs, ys = [x_of(r) for r in members], [r.psnr for r in members]
-        ax.plot(xs, ys, "o-", color=colours(g % 10), label=name, markersize=5)
+        ax.plot(xs, ys, "o-" if lines else "o", color=colours(g % 10), label=name, markersize=5)
         for r, x, y in zip(members, xs, ys):
             ax.annotate(str(r.index), (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7)
-        if published_x:
+        if lines:
             pub = [(x_of(r), r.published["psnr"]) for r in members if "psnr" in r.published]
             if pub:
                 ax.plot(*zip(*pub), "o--", mfc="none", color=colours(g % 10), alpha=0.6, markersize=6)
-    if published_x and any("psnr" in r.published for r in rows):
+    if lines and any("psnr" in r.published for r in rows):
         ax.plot([], [], "o--", mfc="none", color="grey", label=f"published ({grid.reference})")
     if log_x:
         ax.set_xscale("log")
@@ -107,7 +109,7 @@ def _scatter(rows: list[ResultRow], grid: Grid, x_of, xlabel: str, path: Path,
 
 def plot_psnr_vs_images(rows: list[ResultRow], grid: Grid, path: Path) -> Path:
     return _scatter(rows, grid, lambda r: r.train_views, "training images", path, log_x=True,
-                    published_x=True)
+                    lines=True)
 
 
 def plot_psnr_vs_time(rows: list[ResultRow], grid: Grid, path: Path) -> Path:
@@ -193,6 +195,23 @@ def _findings(rows: list[ResultRow], grid: Grid) -> list[str]:
     return lines
 
 
+def _span(values: list) -> str:
+    """'a' or 'a to b' of the smallest and largest of `values`."""
+    if not values:
+        return "—"
+    low, high = min(values), max(values)
+    return fmt(low, 1) if low == high else f"{fmt(low, 1)} to {fmt(high, 1)}"
+
+
+def _load_line(rows: list[ResultRow]) -> list[str]:
+    """The CPU's load average when the runs started, if they ran on a CPU (timings depend on it)."""
+    loads = [r.load for r in rows if r.load is not None and r.machine.startswith("CPU")]
+    if not loads:
+        return []
+    return [f"- Load average of the machine when the runs started: {_span(loads)} (other work "
+            f"on the machine slows the timings)"]
+
+
 def report_markdown(grid: Grid, rows: list[ResultRow], info: StudyInfo, files: dict[str, Path | None]) -> str:
     """The text of REPORT.md; `files` maps plot names to the images written (None: none)."""
     overrides = {k: v for k, v in info.overrides.items() if k not in ("iters", "seconds")}
@@ -205,13 +224,14 @@ def report_markdown(grid: Grid, rows: list[ResultRow], info: StudyInfo, files: d
         machine = machines[0] if machines else info.machine
     lines = [f"# Study `{grid.name}` on `{Path(info.scene).name}`", "", grid.description, "",
              f"- Machine: {machine}; device `{info.device}`; torch {info.torch}",
-             *([f"- Load average when this call started: {info.load:.1f} (other work on the "
-                f"machine slows the timings)"] if info.load is not None and info.device == "cpu" else []),
+             *_load_line(rows),
              f"- Budget: {info.budget}",
              f"- Set on every run: {', '.join(f'{k}={v}' for k, v in overrides.items()) or 'nothing'}",
              f"- Scene: `{info.scene}`; PSNR and SSIM are means over "
              f"{'/'.join(map(str, test_views)) or '—'} held-out views",
-             f"- Started {info.started}; {len(rows)} of {len(grid.combinations)} combinations done",
+             f"- Runs finished {_span([r.finished for r in rows if r.finished])}; {len(rows)} of "
+             f"{len(grid.combinations)} combinations done; this report written by a call started "
+             f"{info.started}",
              *( [f"- Command: `{info.command}`"] if info.command else []), "",
              "Training seconds count only the optimisation steps (not loading, evaluation or "
              "rendering). Published numbers come from other machines, budgets and code: compare "

@@ -74,6 +74,8 @@ class ResultRow:
     published: dict[str, float] = field(default_factory=dict)
     status: str = "trained"  # "trained", "resumed" or "skipped" (finished by an earlier call)
     machine: str = ""  # `describe_machine` of the call that finished the run
+    load: float | None = None  # the machine's load average when that call started the run
+    finished: str = ""  # when the row was written (ISO time)
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,6 @@ class StudyInfo:
     torch: str
     started: str
     command: str = ""
-    load: float | None = None  # `load_average()` when the call started
 
 
 def _check_value(key: str, value: Any, hint: Any, where: str) -> Any:
@@ -258,7 +259,7 @@ def _keep_view(run_dir: Path, view_index: int, study_dir: Path) -> None:
 
 
 def _result_row(combo: Combination, spec: RunSettings, metrics: dict, train_views: int,
-                status: str, machine: str) -> ResultRow:
+                status: str, machine: str, load: float | None) -> ResultRow:
     iterations = int(metrics.get("iterations") or 0)
     seconds = float(metrics.get("train_seconds") or 0.0)
     settings = {**spec.effective(), "views": train_views}
@@ -268,7 +269,8 @@ def _result_row(combo: Combination, spec: RunSettings, metrics: dict, train_view
                      train_seconds=seconds, seconds_per_iter=seconds / max(iterations, 1),
                      psnr=metrics.get("psnr"), ssim=metrics.get("ssim"),
                      eval_seconds=float(metrics.get("eval_seconds") or 0.0),
-                     published=dict(combo.published), status=status, machine=machine)
+                     published=dict(combo.published), status=status, machine=machine, load=load,
+                     finished=_now())
 
 
 def run_combination(combo: Combination, scene_path: str | Path, study_dir: str | Path,
@@ -291,19 +293,24 @@ def run_combination(combo: Combination, scene_path: str | Path, study_dir: str |
         recorded = json.loads((run_dir / ROW).read_text())
         names = {f.name for f in dataclasses.fields(ResultRow)}
         return ResultRow(**{**{k: v for k, v in recorded.items() if k in names}, "status": "skipped"})
+    load = load_average()
     scene = _scene(scene_path, spec.scene_options)
     if state == "trained":
         metrics = json.loads((run_dir / METRICS).read_text())
     else:
         if state == "new" and (run_dir / LOG).is_file():
             (run_dir / LOG).unlink()  # lines of an attempt that never reached a checkpoint
-        metrics = fit(scene, spec.model, spec.model_config, spec.fit_config, run_dir, device,
-                      scene_options=spec.scene_options,
-                      resume=run_dir if state == "partial" else None, show_progress=show_progress)
+        try:
+            metrics = fit(scene, spec.model, spec.model_config, spec.fit_config, run_dir, device,
+                          scene_options=spec.scene_options,
+                          resume=run_dir if state == "partial" else None, show_progress=show_progress)
+        except UserError as err:  # e.g. Ctrl-C, after fit checkpointed the run
+            raise UserError(f"combination {combo.folder}: {err} (running the same study command "
+                            f"again carries on the study)") from None
     _keep_view(run_dir, view_index, study_dir)
     row = _result_row(combo, spec, metrics, len(scene.split("train")),
                       "resumed" if state in ("partial", "trained") else "trained",
-                      describe_machine(device))
+                      describe_machine(device), load)
     (run_dir / ROW).write_text(json.dumps(dataclasses.asdict(row), indent=2) + "\n")
     return row
 
@@ -313,8 +320,12 @@ def study_info(grid: Grid, scene_path: str | Path, overrides: dict[str, Any],
     """The StudyInfo of a study starting now on `device`."""
     return StudyInfo(grid=grid.name, scene=str(scene_path), budget=describe_budget(overrides, grid),
                      overrides=dict(overrides), machine=describe_machine(device), device=str(device),
-                     torch=torch.__version__, command=command, load=load_average(),
-                     started=datetime.datetime.now().isoformat(timespec="seconds"))
+                     torch=torch.__version__, command=command,
+                     started=_now())
+
+
+def _now() -> str:
+    return datetime.datetime.now().isoformat(timespec="seconds")
 
 
 def row_summary(row: ResultRow) -> str:

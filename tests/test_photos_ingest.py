@@ -1,0 +1,132 @@
+"""Reading the user's photos: orientation, formats, zips, duplicates, blur and bad files."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image, ImageFilter
+
+from windowshop.errors import UserError
+from windowshop.photos import ingest
+
+KERMIT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kermit"
+
+
+def _pattern(width: int = 64, height: int = 48) -> np.ndarray:
+    """An asymmetric test picture (H, W, 3) uint8: a gradient with a bright top-left block."""
+    y, x = np.mgrid[0:height, 0:width]
+    image = np.stack([x * 255 // width, y * 255 // height, (x + y) % 256], -1).astype(np.uint8)
+    image[:10, :16] = 255
+    return image
+
+
+def test_exif_orientation_is_applied(tmp_path):
+    pixels = _pattern()
+    exif = Image.Exif()
+    exif[0x0112] = 6  # "rotate 90 CW to display": stored sideways, shown upright
+    stored = Image.fromarray(pixels).transpose(Image.Transpose.ROTATE_90)
+    stored.save(tmp_path / "side.png", exif=exif)
+    photo = ingest.read_photo(tmp_path / "side.png", max_side=None)
+    assert photo.pixels.shape == pixels.shape
+    np.testing.assert_array_equal(photo.pixels, pixels)
+
+
+def test_resized_to_working_size_with_scale():
+    photo = ingest.read_photo(KERMIT / "kermit000.jpg", max_side=320)
+    assert photo.pixels.shape == (240, 320, 3)
+    assert photo.scale == pytest.approx(0.5)
+    assert photo.name == "kermit000"
+
+
+@pytest.mark.skipif(not ingest.HEIF, reason="pillow-heif is not installed")
+def test_heic_photo_is_read(tmp_path):
+    Image.open(KERMIT / "kermit000.jpg").save(tmp_path / "k.heic", quality=90)
+    photo = ingest.read_photo(tmp_path / "k.heic", max_side=None)
+    reference = np.asarray(Image.open(KERMIT / "kermit000.jpg"), dtype=np.float32)
+    assert photo.pixels.shape == reference.shape
+    assert np.abs(photo.pixels.astype(np.float32) - reference).mean() < 8.0
+
+
+def test_not_an_image_is_named(tmp_path):
+    (tmp_path / "notes.jpg").write_text("this is a shopping list, not a photo")
+    with pytest.raises(UserError, match=r"notes\.jpg: not an image"):
+        ingest.read_photo(tmp_path / "notes.jpg", max_side=None)
+
+
+def test_truncated_image_is_named(tmp_path):
+    data = (KERMIT / "kermit001.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[: len(data) // 3])
+    with pytest.raises(UserError, match=r"cut\.jpg: the image is truncated"):
+        ingest.read_photo(tmp_path / "cut.jpg", max_side=None)
+
+
+def test_read_photos_lists_every_bad_file(tmp_path):
+    (tmp_path / "a.jpg").write_text("no")
+    (tmp_path / "b.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 20)
+    files = [tmp_path / "a.jpg", tmp_path / "b.png", KERMIT / "kermit000.jpg"]
+    with pytest.raises(UserError, match=r"2 of 3 files could not be read") as err:
+        ingest.read_photos(files, None, ingest.Dropped())
+    assert "a.jpg" in str(err.value) and "b.png" in str(err.value)
+
+
+def test_duplicates_and_blurred_are_dropped_with_names(tmp_path):
+    files = sorted(KERMIT.glob("*.jpg"))[:5]
+    copy = tmp_path / "again.jpg"
+    copy.write_bytes(files[2].read_bytes())
+    blurred = tmp_path / "shaky.jpg"
+    Image.open(files[3]).filter(ImageFilter.GaussianBlur(4)).save(blurred, quality=95)
+    dropped = ingest.Dropped()
+    photos = ingest.read_photos([*files, copy, blurred], None, dropped)
+    assert [p.name for p in photos] == [f.stem for f in files]
+    assert dropped.reasons["again.jpg"] == f"exact duplicate of {files[2].name}"
+    assert dropped.reasons["shaky.jpg"].startswith("too blurred")
+
+
+def test_fewer_than_three_usable_photos(tmp_path):
+    files = sorted(KERMIT.glob("*.jpg"))[:2]
+    copy = tmp_path / "copy.jpg"
+    copy.write_bytes(files[0].read_bytes())
+    with pytest.raises(UserError, match=r"only 2 usable photos; windowshop needs at least 3") as err:
+        ingest.read_photos([*files, copy], None, ingest.Dropped())
+    assert "copy.jpg: exact duplicate of kermit000.jpg" in str(err.value)
+
+
+def test_gather_folder_ignores_other_files(tmp_path):
+    for name in ["b.jpg", "a.PNG", "notes.txt", ".DS_Store"]:
+        (tmp_path / name).write_bytes(b"x")
+    (tmp_path / "sub").mkdir()
+    inputs = ingest.gather_inputs(tmp_path, tmp_path / "scratch")
+    assert inputs.kind == "photos"
+    assert [p.name for p in inputs.files] == ["a.PNG", "b.jpg"]
+    assert inputs.ignored == ["notes.txt"]
+
+
+def test_gather_zip_flattens_and_cannot_escape(tmp_path):
+    archive = tmp_path / "photos.zip"
+    with zipfile.ZipFile(archive, "w") as zf:
+        zf.write(KERMIT / "kermit000.jpg", "a/kermit000.jpg")
+        zf.write(KERMIT / "kermit001.jpg", "b/kermit000.jpg")  # same name in another folder
+        zf.write(KERMIT / "kermit002.jpg", "../../evil.jpg")
+        zf.writestr("__MACOSX/._kermit000.jpg", b"junk")
+        zf.writestr("readme.txt", b"hello")
+    scratch = tmp_path / "scratch"
+    inputs = ingest.gather_inputs(archive, scratch)
+    assert sorted(p.name for p in inputs.files) == ["kermit000-2.jpg", "kermit000.jpg"]
+    assert all(scratch in p.parents for p in inputs.files)
+    assert not list(tmp_path.rglob("evil.jpg"))  # a member climbing out with ".." is skipped
+
+
+def test_gather_refuses_other_files(tmp_path):
+    (tmp_path / "list.txt").write_text("hello")
+    with pytest.raises(UserError, match=r"list\.txt: not a photo, a video"):
+        ingest.gather_inputs(tmp_path / "list.txt", tmp_path)
+
+
+def test_sharpness_drops_with_blur():
+    image = Image.open(KERMIT / "kermit000.jpg")
+    sharp = ingest.sharpness(np.asarray(image))
+    soft = ingest.sharpness(np.asarray(image.filter(ImageFilter.GaussianBlur(3))))
+    assert soft < 0.2 * sharp

@@ -21,12 +21,12 @@ from pathlib import Path
 import torch
 
 from windowshop.config import FitConfig, VideoOptions
+from windowshop.demo import demo_scene
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
 from windowshop.fit.trainer import fit
 from windowshop.model import MODELS, model_class, model_config
 from windowshop.render.frames import display_background, render_camera
-from windowshop.scene.synthetic import synthetic_scene
 from windowshop.video.encode import VideoOutputs
 from windowshop.video.paths import turntable_path
 from windowshop.video.turntable import render_turntable
@@ -54,7 +54,7 @@ def available(name: str) -> bool:
 
 def train_briefly(name: str, preset: str | None, seconds: float, out: Path, device) -> dict:
     """Fit `name` on the built-in object for `seconds`; returns fit's metrics."""
-    scene = synthetic_scene(n_train=40, n_test=1, size=64)  # one held-out view: a quick sanity PSNR
+    scene = demo_scene(40, 1, 64)  # one held-out view: a quick sanity PSNR
     return fit(scene, name, model_config(name, preset), FitConfig(iters=None, seconds=seconds), out,
                device, show_progress=False)
 

@@ -150,7 +150,8 @@ def run(url: str, data: bytes, args: argparse.Namespace) -> dict:
     return {
         "benchmark": "service_load", "clients": args.clients, "max_queued": args.max_queued,
         "upload_bytes": len(data), "accepted": len(accepted),
-        "refused": {code: sum(r["error"] == code for r in refused) for code in {r["error"] for r in refused}},
+        "refused": {code: sum(r["error"] == code for r in refused)
+                    for code in {r["error"] for r in refused}},
         "unclear": len(unclear), "lost": sum(s == "LOST" for s in states.values()),
         "states_after": {s: sum(v == s for v in states.values()) for s in set(states.values())},
         "burst_seconds": round(burst_seconds, 2),

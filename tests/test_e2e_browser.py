@@ -80,7 +80,11 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     spin = page.locator("#spin")
     wait_js(page, "document.getElementById('spin-img').complete"
                            " && document.getElementById('spin-img').naturalWidth > 0")
-    before = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
+    def frame() -> tuple:
+        image = page.get_attribute("#spin-img", "src")
+        return spin.get_attribute("data-frame"), image, spin.screenshot()
+
+    before = frame()
     box = spin.bounding_box()
     y = box["y"] + box["height"] / 2
     page.mouse.move(box["x"] + box["width"] * 0.3, y)
@@ -89,7 +93,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
         page.mouse.move(box["x"] + box["width"] * (0.3 + 0.03 * step), y)
     page.mouse.up()
     wait_js(page, "document.getElementById('spin-img').complete")
-    after = (spin.get_attribute("data-frame"), page.get_attribute("#spin-img", "src"), spin.screenshot())
+    after = frame()
     assert after[0] != before[0] and after[1] != before[1]
     assert after[2] != before[2]  # the picture itself changed, not only the attribute
 

@@ -118,7 +118,7 @@ def test_near_far_default_to_the_bounds_and_can_be_overridden():
 
 
 def test_learning_rate_decays_exponentially_to_the_final_rate():
-    model = NerfModel(NERF_PRESETS["tiny"], BOUNDS)
+    model = NerfModel(SMALL, BOUNDS)
     assert model.lr_factor(0.0) == 1.0
     assert model.lr_factor(1.0) == pytest.approx(0.1)
     assert model.lr_factor(0.5) == pytest.approx(0.1 ** 0.5)
@@ -135,3 +135,21 @@ def test_rendering_without_gradients_slices_the_points_and_agrees():
     whole = model.render_rays(origins, directions, bg)
     assert torch.allclose(sliced.rgb, whole.rgb, atol=1e-6)
     assert torch.allclose(sliced.depth, whole.depth, atol=1e-5)
+
+
+@pytest.mark.parametrize("activation", ["relu", "softplus"])
+def test_softplus_density_keeps_a_gradient_where_relu_is_dead(activation):
+    torch.manual_seed(0)
+    field = NerfField(dataclasses.replace(SMALL, density_activation=activation))
+    with torch.no_grad():
+        field.sigma_head.bias.fill_(-30.0)  # every raw density far below zero
+    sigma, _ = field(torch.randn(8, 3), torch.nn.functional.normalize(torch.randn(8, 3), dim=-1))
+    sigma.sum().backward()
+    alive = field.sigma_head.bias.grad.abs().item() > 0
+    assert alive == (activation == "softplus")
+    assert sigma.min() >= 0
+
+
+def test_unknown_density_activation_is_rejected():
+    with pytest.raises(ValueError, match="density_activation"):
+        NerfField(dataclasses.replace(SMALL, density_activation="exp"))

@@ -121,6 +121,15 @@ def test_photo_names_are_made_safe_and_suffixes_follow_content(client):
     assert names == ["a-002.png", "a.webp", "evil_name.jpg"]
 
 
+def test_heic_photos_from_phones_are_taken(client):
+    pytest.importorskip("pillow_heif")
+    files = [("files", (f"IMG_{i}.HEIC", image_bytes("HEIF", seed=i), "image/heic")) for i in range(3)]
+    job = client.post("/api/jobs", files=files)
+    assert job.status_code == 201, job.text
+    names = sorted(p.name for p in (client.settings.jobs_dir / job.json()["id"] / "input").iterdir())
+    assert names == ["IMG_0.heic", "IMG_1.heic", "IMG_2.heic"]
+
+
 def test_a_video_makes_a_job(client, tmp_path):
     r = client.post("/api/jobs", files=[("files", ("walk.MOV", video_bytes(tmp_path), "video/mp4"))])
     assert r.status_code == 201, r.text
@@ -167,8 +176,8 @@ def test_refusals_of_types_by_content(client, tmp_path):
     fake_video = b"\x00\x00\x00\x18ftypisom" + bytes(200)
     refused(client.post("/api/jobs", files=[("files", ("v.mp4", fake_video, "video/mp4"))]),
             415, "broken_video")
-    refused(client.post("/api/jobs", files=[("files", ("s.zip", b"PK\x03\x04" + bytes(50), "application/zip"))]),
-            415, "broken_zip")
+    broken_zip = [("files", ("s.zip", b"PK\x03\x04" + bytes(50), "application/zip"))]
+    refused(client.post("/api/jobs", files=broken_zip), 415, "broken_zip")
     assert job_folders(client) == []
 
 
@@ -224,7 +233,8 @@ def test_a_decompression_bomb_is_refused(client):
     ({"a.png": image_bytes("PNG")[:60]}, (), 415, "broken_image"),
 ])
 def test_refusals_of_zips(client, entries, links, status, code):
-    r = client.post("/api/jobs", files=[("files", ("s.zip", zip_bytes(entries, links), "application/zip"))])
+    upload = [("files", ("s.zip", zip_bytes(entries, links), "application/zip"))]
+    r = client.post("/api/jobs", files=upload)
     detail = refused(r, status, code)
     assert "'s.zip'" in detail
     assert job_folders(client) == []

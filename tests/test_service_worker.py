@@ -109,7 +109,8 @@ def test_jobs_run_to_done_one_at_a_time_unless_configured(make_worker, concurren
     spans = sorted((marks(worker.settings, i)[0][1], marks(worker.settings, i)[1][1]) for i in ids)
     overlaps = sum(later[0] < earlier[1] for earlier, later in zip(spans, spans[1:]))
     assert overlaps == 0 if concurrency == 1 else overlaps >= 1
-    assert [marks(worker.settings, i)[0][1] for i in ids] == sorted(s for s, _ in spans)  # queue order
+    started = [worker.store.get(i).started_at for i in ids]
+    assert started == sorted(started)  # claimed in the queue's order
 
 
 @pytest.mark.parametrize("job_fn, message", [
@@ -151,6 +152,17 @@ def test_deleting_a_running_job_stops_it_and_removes_its_files(make_worker):
     run_until(worker, lambda: not worker.running)
     assert not process.is_alive()
     assert not job_dir(worker.settings, job_id).exists()
+
+
+def test_an_orderly_stop_puts_running_jobs_back_without_counting_a_try(make_worker):
+    worker = make_worker(endless_job)
+    [job_id] = add_jobs(worker, 1)
+    run_until(worker, lambda: marks(worker.settings, job_id))
+    process = worker.running[job_id][0]
+    worker.stop()
+    assert not process.is_alive()
+    job = worker.store.get(job_id)
+    assert (job.state, job.attempts, job.run_token) == ("queued", 0, None)
 
 
 def test_start_requeues_interrupted_jobs_and_gives_up_after_a_few(tmp_path):
@@ -219,3 +231,13 @@ def test_progress_of_a_posed_scene_counts_only_the_stages_it_runs(tmp_path):
     assert store.get("p" * 22).eta_seconds == pytest.approx(30 * (1 - done) / done, abs=0.1)
     assert "preparing" not in store.get("p" * 22).stages
     assert Path(store.path).exists()
+
+
+def test_service_settings_reach_the_pipeline():
+    from windowshop.pipeline import VideoSettings
+    from windowshop.service.jobs import video_settings
+
+    assert video_settings(ServiceSettings()) == VideoSettings()  # the pipeline's own defaults
+    fast = video_settings(ServiceSettings(train_steps=100, frames=8, frame_size=48, model="nerf"))
+    assert (fast.train_steps, fast.train_seconds, fast.frames, fast.frame_size, fast.model) == (
+        100, None, 8, 48, "nerf")  # a step budget replaces the default time budget

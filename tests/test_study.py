@@ -53,12 +53,13 @@ def test_nerf_ablation_rows():
 
 
 def test_budget_and_set_override_every_row():
-    overrides = {**parse_assignments(["batch-rays=256", "view_dependent=false"]),
-                 **budget_overrides(None, 20)}
+    overrides = {**parse_assignments(["batch-rays=256", "freqs_dir=2"]), **budget_overrides(None, 20)}
     for combo in load_grid("seed", overrides=overrides).combinations:
         spec = resolve(combo.settings, combo.folder)
         assert spec.fit_config == FitConfig(iters=None, seconds=20.0, batch_rays=256)
-        assert spec.model_config.view_dependent is False
+        assert spec.model_config.freqs_dir == 2
+    with pytest.raises(UserError, match="rows themselves set view_dependent"):
+        load_grid("seed", overrides=parse_assignments(["view_dependent=false"]))
     with pytest.raises(UserError, match="--iters"):
         budget_overrides(0, None)
     with pytest.raises(UserError, match="KEY=VALUE"):
@@ -84,7 +85,8 @@ def test_grid_file_rows_product_and_errors(tmp_path):
     for bad, message in [({"frequencies": 3}, "01.*--frequencies"),
                          ({"voxels": "many"}, "voxels must be an integer"),
                          ({"views": "all"}, "views"), ({"model": "nope"}, "unknown model")]:
-        combo = load_grid(path=fast, overrides=bad).combinations[0]
+        fast.write_text(json.dumps({"rows": [{"model": "fast", "voxels": 32**3, "iters": 5, **bad}]}))
+        combo = load_grid(path=fast).combinations[0]
         with pytest.raises(UserError, match=message):
             resolve(combo.settings, combo.folder)
     (tmp_path / "oops.yaml").write_text("rowz: []\n")

@@ -92,7 +92,16 @@ class FastModel(RadianceModel):
         h = self.features(points)
         if self.config.sh_degree >= 0:
             h = torch.cat([h, spherical_harmonics(directions, self.config.sh_degree)], dim=-1)
-        return torch.sigmoid(self.mlp(h))
+        with torch.autocast(h.device.type, dtype=torch.bfloat16, enabled=self._bf16(h.device)):
+            return torch.sigmoid(self.mlp(h).float())
+
+    def _bf16(self, device: torch.device) -> bool:
+        """Whether the MLP runs in bfloat16: asked for and fast on this device (3x on AVX512-BF16)."""
+        if not self.config.mlp_bf16:
+            return False
+        if device.type == "cuda":
+            return torch.cuda.is_bf16_supported()
+        return device.type == "cpu" and torch.ops.mkldnn._is_mkldnn_bf16_supported()
 
     # --- rendering ------------------------------------------------------------------------------
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,

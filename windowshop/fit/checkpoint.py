@@ -62,7 +62,9 @@ def camera_from_dict(data: dict) -> Camera:
 
 def scene_record(scene: Scene, options: SceneOptions) -> dict:
     """What a run must remember of its scene to be evaluated, resumed or rendered again."""
-    return {"source": str(scene.source), "format": scene.format,
+    source = Path(scene.source)
+    source = source.resolve() if source.exists() else source  # eval may run from elsewhere
+    return {"source": str(source), "format": scene.format,
             "options": dataclasses.asdict(options), "background": scene.background,
             "transform": np.asarray(scene.transform, dtype=float).tolist(),
             "aabb": np.asarray(scene.aabb, dtype=float).tolist(),

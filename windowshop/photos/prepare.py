@@ -25,7 +25,8 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos import objectbox, output, report
 from windowshop.photos.frames import sample_frames
-from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
+from windowshop.photos.ingest import (VIDEO_SUFFIXES, Dropped, Inputs, Photo, check_enough,
+                                      gather_inputs, read_photos)
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
@@ -109,9 +110,10 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> S
                        seed=options.seed, verbose=options.verbose)
 
 
-def check_placed(sfm: SfmResult, count: int) -> None:
-    """UserError when the photos lack texture, or too few of them could be placed."""
-    poor = sorted(name for name, k in sfm.keypoints.items() if k < MIN_KEYPOINTS)
+def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
+    """UserError when the photos lack texture, or too few of them could be placed; `shown` maps
+    image file names to the names the user knows (their files)."""
+    poor = sorted(shown[name] for name, k in sfm.keypoints.items() if k < MIN_KEYPOINTS)
     texture = (f"the background has too little texture: fewer than {MIN_KEYPOINTS} features in "
                f"{len(poor)} of {count} photos ({', '.join(poor[:10])}{' ...' if len(poor) > 10 else ''}); "
                f"photograph the object on a patterned surface (a newspaper, a printed cloth) "
@@ -120,11 +122,16 @@ def check_placed(sfm: SfmResult, count: int) -> None:
         raise UserError(texture)
     if len(sfm.placed) >= max(3, math.ceil(MIN_PLACED_SHARE * count)):
         return
-    names = ", ".join(sfm.unplaced[:20]) + (" ..." if len(sfm.unplaced) > 20 else "")
+    names = ", ".join(shown[n] for n in sfm.unplaced[:20]) + (" ..." if len(sfm.unplaced) > 20 else "")
     raise UserError(f"could only place {len(sfm.placed)} of {count} photos; not placed: {names}. "
                     f"Take more photos with overlap: walk around the object in small steps "
                     f"(10-15 degrees) so that each photo shares most of its view with the next"
                     + (f". Also, {texture}" if len(poor) > count // 4 else ""))
+
+
+def _shown(photo: Photo) -> str:
+    """The name the user knows a photo by: its file, or for a video frame the frame's name."""
+    return photo.name if photo.source.suffix.lower() in VIDEO_SUFFIXES else photo.source.name
 
 
 def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Located:
@@ -174,7 +181,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
-        "unplaced": [n.rsplit(".", 1)[0] for n in sfm.unplaced],
+        "unplaced": [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced],
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": int(len(found.points)),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
@@ -205,7 +212,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
             output.write_image(work, photo.name, photo.pixels)
         names = [f"{p.name}.jpg" for p in photos]
         sfm = reconstruct(image_dir, names, work, _settings(inputs, photos, options), stages)
-        check_placed(sfm, len(photos))
+        check_placed(sfm, len(photos), {f"{p.name}.jpg": _shown(p) for p in photos})
         with stages.stage("finding the object"):
             found = locate(sfm, {f"{p.name}.jpg": p.pixels for p in photos}, options.masks)
         with stages.stage("writing the scene", len(found.photos)) as advance:

@@ -55,9 +55,9 @@ class SfmResult:
 
 
 def quiet_logging(verbose: bool) -> None:
-    """pycolmap (glog) prints only errors unless `verbose`."""
-    pycolmap.logging.minloglevel = 0 if verbose else 2
-    pycolmap.logging.stderrthreshold = 0 if verbose else 2
+    """pycolmap (glog) prints nothing unless `verbose` (its errors become our UserErrors)."""
+    pycolmap.logging.minloglevel = 0 if verbose else 3
+    pycolmap.logging.stderrthreshold = 0 if verbose else 3
 
 
 def _reader_options(settings: SfmSettings) -> pycolmap.ImageReaderOptions:

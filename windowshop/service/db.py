@@ -105,7 +105,8 @@ class JobStore:
             if max_queued is not None and waiting >= max_queued:
                 return None
             db.execute("INSERT INTO jobs (id, state, input_kind, input_summary, created_at) "
-                       "VALUES (?, ?, ?, ?, ?)", (job_id, QUEUED, input_kind, input_summary, time.time()))
+                       "VALUES (?, ?, ?, ?, ?)",
+                       (job_id, QUEUED, input_kind, input_summary, time.time()))
         return self.get(job_id)
 
     def get(self, job_id: str) -> Job | None:
@@ -142,7 +143,8 @@ class JobStore:
         with self._connect() as db:
             cur = db.execute("UPDATE jobs SET state = ?, stage = ?, progress = ?, stages = ?, "
                              "eta_seconds = ? WHERE id = ? AND run_token = ?",
-                             (stage, stage, progress, json.dumps(stages), eta_seconds, job_id, run_token))
+                             (stage, stage, progress, json.dumps(stages), eta_seconds, job_id,
+                              run_token))
         return cur.rowcount == 1
 
     def finish(self, job_id: str, run_token: str, state: str, error: str | None = None,
@@ -165,6 +167,14 @@ class JobStore:
     def delete(self, job_id: str) -> bool:
         with self._connect() as db:
             return db.execute("DELETE FROM jobs WHERE id = ?", (job_id,)).rowcount == 1
+
+    def release(self, job_id: str, run_token: str) -> bool:
+        """Put a job stopped by an orderly shutdown back in the queue; that try does not count."""
+        with self._connect() as db:
+            cur = db.execute("UPDATE jobs SET state = ?, run_token = NULL, eta_seconds = NULL, "
+                             "attempts = attempts - 1 WHERE id = ? AND run_token = ?",
+                             (QUEUED, job_id, run_token))
+        return cur.rowcount == 1
 
     def requeue_interrupted(self) -> tuple[list[str], list[str]]:
         """After a restart: running jobs go back to the queue, or fail after MAX_ATTEMPTS tries.

@@ -1,7 +1,8 @@
 """One job, run in its own process by the worker: the uploaded input through the pipeline.
 
 A job's folder holds `input/` (the checked upload), `work/` (the pipeline's scene and run, removed
-when the job ends) and `result/` (video.mp4, poster.jpg, frames/0000.jpg ...), which the API serves.
+when the job ends) and `result/` (video.mp4, poster.jpg, frames/frame_0000.jpg ...), which the API
+serves.
 """
 
 from __future__ import annotations

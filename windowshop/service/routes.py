@@ -154,7 +154,8 @@ async def create_job(request: Request) -> JobCreated:
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
-    job = await run_in_threadpool(store.create, job_id, checked.kind, checked.summary, settings.max_queued)
+    job = await run_in_threadpool(store.create, job_id, checked.kind, checked.summary,
+                                  settings.max_queued)
     if job is None:
         shutil.rmtree(folder, ignore_errors=True)  # the queue filled while this upload came in
         raise _queue_full(settings)

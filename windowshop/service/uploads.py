@@ -25,8 +25,9 @@ try:  # HEIC photos from phones, when the optional decoder is installed
     from pillow_heif import register_heif_opener
 
     register_heif_opener()
+    HEIF = True
 except ImportError:
-    pass
+    HEIF = False
 
 IMAGE_FORMATS = {"JPEG": ".jpg", "PNG": ".png", "WEBP": ".webp", "HEIF": ".heic"}
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv")  # what video_suffix names a video
@@ -108,16 +109,29 @@ def check_image(path: Path, what: str, settings: ServiceSettings) -> str:
                 if im.format not in IMAGE_FORMATS:
                     raise UploadRefused(415, "unsupported_type", f"{what}: {im.format} images are "
                                         "not supported; send JPEG, PNG or WebP photos")
-                if im.format == "JPEG":  # decode the whole stream, at 1/8 scale since only validity matters
+                if im.format == "JPEG":  # decode the whole stream at 1/8 scale: only validity matters
                     im.draft("RGB", (max(1, width // 8), max(1, height // 8)))
                 im.load()
                 return im.format
         except Image.DecompressionBombError:
             raise UploadRefused(413, "too_many_pixels", f"{what} has too many pixels (a decompression "
                                 f"bomb?); the limit is {settings.max_pixels} pixels per image") from None
-        except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as err:
+        except UnidentifiedImageError:
+            if _is_heif(path) and not HEIF:
+                raise UploadRefused(415, "unsupported_type", f"{what} is a HEIC photo, which this "
+                                    "service cannot decode (pillow-heif is not installed); set the "
+                                    "camera to JPEG ('Most compatible') or convert it") from None
+            raise UploadRefused(415, "broken_image", f"{what} looks like an image but cannot be "
+                                "decoded; send the original photo file") from None
+        except (OSError, SyntaxError, ValueError) as err:
             raise UploadRefused(415, "broken_image", f"{what} looks like an image but cannot be "
                                 f"decoded ({err}); send the original photo file") from None
+
+
+def _is_heif(path: Path) -> bool:
+    with open(path, "rb") as f:
+        head = f.read(12)
+    return head[4:8] == b"ftyp" and head[8:12] in _HEIF_BRANDS
 
 
 def _too_many_pixels(what: str, width: int, height: int, settings: ServiceSettings) -> UploadRefused:
@@ -146,7 +160,8 @@ def check_video(path: Path, what: str, settings: ServiceSettings) -> dict:
     return meta
 
 
-def check_upload(parts: list[tuple[Path, str]], job_dir: Path, settings: ServiceSettings) -> CheckedUpload:
+def check_upload(parts: list[tuple[Path, str]], job_dir: Path,
+                 settings: ServiceSettings) -> CheckedUpload:
     """Check the saved parts `(path, name the user gave)` and lay them out in `job_dir/input`."""
     if not parts:
         raise UploadRefused(400, "no_files", "no files were sent: add photos, a video or a zip in "
@@ -175,7 +190,8 @@ def check_upload(parts: list[tuple[Path, str]], job_dir: Path, settings: Service
                         f"a mix ({len(parts)} files: {', '.join(sorted(set(kinds)))})")
 
 
-def _take_photos(parts: list[tuple[Path, str]], inputs: Path, settings: ServiceSettings) -> CheckedUpload:
+def _take_photos(parts: list[tuple[Path, str]], inputs: Path,
+                 settings: ServiceSettings) -> CheckedUpload:
     if len(parts) < settings.min_photos:
         raise UploadRefused(400, "too_few_photos", f"{len(parts)} photo(s) sent; at least "
                             f"{settings.min_photos} are needed, taken all around the object")

@@ -61,10 +61,11 @@ class Worker:
         self._launch()
 
     def stop(self) -> None:
-        """Kill the running jobs' processes; their jobs stay running and are requeued at next start."""
-        for process, _ in self.running.values():
+        """Kill the running jobs' processes and put their jobs back in the queue, to start over."""
+        for job_id, (process, token) in self.running.items():
             process.kill()
             process.join()
+            self.store.release(job_id, token)
         self.running.clear()
 
     def _launch(self) -> None:
@@ -87,8 +88,9 @@ class Worker:
             process.join()
             del self.running[job_id]
             if process.exitcode != 0:
-                self.store.finish(job_id, token, FAILED, error="the job stopped unexpectedly (exit "
-                                  f"code {process.exitcode}, out of memory?); try fewer or smaller photos")
+                self.store.finish(job_id, token, FAILED, error=f"the job stopped unexpectedly (exit "
+                                  f"code {process.exitcode}, out of memory?); try fewer or "
+                                  "smaller photos")
             self._clean_up(job_id)
 
     def _stop_abandoned(self) -> None:

@@ -176,6 +176,10 @@ def grid_from_dict(data: dict, where: str, overrides: dict[str, Any] | None = No
         columns += [key for key in row if key not in columns and key not in BUDGET_KEYS]
         combinations.append(Combination(index=index, name=name, settings={**base, **row, **overrides},
                                         published={k: float(v) for k, v in published.items()}))
+    clash = [key for key in overrides if key in columns]
+    if clash:  # the rows' own names and columns would then lie about what ran
+        raise UserError(f"{where}: the rows themselves set {', '.join(clash)}, which the study "
+                        f"compares; change the grid instead of --set {clash[0]}=...")
     lead = {key: i for i, key in enumerate(LEADING_COLUMNS)}
     columns.sort(key=lambda key: lead.get(key, len(lead)))
     return Grid(name=str(data.get("name") or Path(where).stem),

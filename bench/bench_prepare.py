@@ -1,0 +1,89 @@
+"""Seconds per `prepare` stage for kermit (11 photos) and 20 beer_can photos, as JSON.
+
+    python bench/bench_prepare.py [--max-side 640] [--video] [--out results.json]
+
+`--video` also times `windowshop video` end to end (prepare, fit, render) on the 20 photos with
+its default settings. Pose errors against beer_can's COLMAP model are included for reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from windowshop.config import PrepareOptions
+from windowshop.photos.align import pose_errors
+from windowshop.photos.prepare import prepare
+from windowshop.scene import read_source
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def beer_photos(count: int = 20) -> list[Path]:
+    """The 20 beer_can photos of tests/test_prepare_poses.py (frames with trustworthy poses)."""
+    doubtful = {i for jump in (13, 34, 52) for i in range(jump - 1, jump + 7)} | {30, 44}
+    frames = [i for i in range(71) if i not in doubtful]
+    picks = np.linspace(0, len(frames) - 1, count).round().astype(int)
+    return [DATA / "beer_can" / "images" / f"{frames[i]:04d}.jpg" for i in picks]
+
+
+def timed_prepare(source: Path, out: Path, options: PrepareOptions) -> dict:
+    start = time.perf_counter()
+    result = prepare(source, out, options, show=False)
+    report = result.report
+    return {"seconds": report["seconds"], "total_seconds": round(time.perf_counter() - start, 2),
+            "used": report["used"], "placed": report["placed"],
+            "attempts": [a["label"] for a in report["attempts"]],
+            "reprojection_error_px": round(report["reprojection_error_px"], 3)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--max-side", type=int, default=640)
+    parser.add_argument("--video", action="store_true", help="also time `windowshop video` on 20 photos")
+    parser.add_argument("--out", default=None, help="also write the JSON here")
+    args = parser.parse_args()
+    options = PrepareOptions(max_side=args.max_side)
+    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "max_side": args.max_side}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        results["kermit"] = timed_prepare(DATA / "kermit", tmp / "kermit", options)
+        photos = tmp / "beer20"
+        photos.mkdir()
+        for path in beer_photos():
+            (photos / path.name).symlink_to(path)
+        results["beer_can_20"] = timed_prepare(photos, tmp / "beer", options)
+        meta = json.loads((tmp / "beer" / "transforms.json").read_text())
+        errors = pose_errors({Path(f["file_path"]).stem: np.array(f["transform_matrix"]) for f in meta["frames"]},
+                             {f.image_path.stem: f.camera.c2w
+                              for f in read_source(DATA / "beer_can" / "sparse" / "0").frames})
+        results["beer_can_20"].update(max_rotation_deg=round(float(errors.rotation_deg.max()), 3),
+                                      max_centre_share=round(float(errors.centre_share.max()), 4))
+        if args.video:
+            from windowshop.device import pick_device
+            from windowshop.pipeline import VideoSettings, make_video
+
+            settings = VideoSettings(prepare=options)
+            start = time.perf_counter()
+            video = make_video(photos, tmp / "spin.mp4", settings, device=pick_device(), show=False)
+            results["video_beer_can_20"] = {
+                "seconds": {k: round(v, 2) for k, v in video.seconds.items()},
+                "total_seconds": round(time.perf_counter() - start, 2), "device": str(pick_device()),
+                "model": settings.model, "train_seconds": settings.train_seconds,
+                "frames": settings.frames, "frame_size": settings.frame_size,
+                "held_out_psnr": video.metrics.get("psnr")}
+    text = json.dumps(results, indent=2)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,127 @@
+"""Finding the object: its box from sparse points, masks on plain backgrounds, pose alignment."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.photos import objectbox
+from windowshop.photos.align import pose_errors, rotation_angle, umeyama
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+
+KERMIT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kermit"
+
+
+def _ring(n: int = 12, radius: float = 4.0, size: int = 64) -> list[Camera]:
+    """Cameras on a ring 25 degrees above the origin, all looking at it (up = +z)."""
+    cams = []
+    for a in np.linspace(0, 2 * np.pi, n, endpoint=False):
+        eye = radius * np.array([np.cos(a) * np.cos(0.44), np.sin(a) * np.cos(0.44), np.sin(0.44)])
+        cams.append(Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
+                           c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))))
+    return cams
+
+
+def test_object_box_keeps_the_object_and_drops_the_background():
+    rng = np.random.default_rng(0)
+    obj = rng.uniform([-0.4, -0.3, -0.5], [0.4, 0.3, 0.5], size=(400, 3))
+    wall = np.column_stack([rng.uniform(-6, 6, 300), np.full(300, 7.0), rng.uniform(-1, 3, 300)])
+    floor = np.column_stack([rng.uniform(-8, 8, (300, 2)), np.full(300, -0.5)])
+    floor = floor[np.linalg.norm(floor[:, :2], axis=1) > 2.5]  # floor away from the object
+    cams = _ring()
+    chosen = objectbox.object_points(np.concatenate([obj, wall, floor]), cams)
+    lo, hi = objectbox.object_box(chosen, cams, np.eye(3))
+    assert len(chosen) == len(obj)
+    assert np.all(lo <= obj.min(0)) and np.all(hi >= obj.max(0))
+    assert np.all(lo > obj.min(0) - 0.1) and np.all(hi < obj.max(0) + 0.1)
+
+
+def test_object_box_without_points_is_the_sphere_every_view_sees():
+    cams = _ring()
+    lo, hi = objectbox.object_box(np.zeros((0, 3)), cams, np.eye(3))
+    half = 4.0 * np.sin(np.arctan(0.5))  # distance x sin(half field of view)
+    np.testing.assert_allclose(lo, -half, atol=1e-6)
+    np.testing.assert_allclose(hi, half, atol=1e-6)
+
+
+def test_seen_counts_match_projection():
+    cams = _ring(n=4)
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 30.0]])  # the centre; a point above every view
+    np.testing.assert_array_equal(objectbox.seen_counts(points, cams), [4, 0])
+
+
+def _ring_object(background: int, size: int = 160) -> tuple[np.ndarray, np.ndarray]:
+    """(pixels (H, W, 3) uint8, true mask (H, W)): a textured ring (a big hole showing the
+    background) with a small dark spot, on a plain `background` with sensor noise."""
+    rng = np.random.default_rng(2)
+    y, x = np.mgrid[0:size, 0:size] - size / 2
+    r = np.hypot(x, y)
+    truth = (r < 0.4 * size) & (r > 0.15 * size)
+    texture = np.stack([128 + 60 * np.sin(x / 3), 128 + 60 * np.cos(y / 4), 128 + 40 * np.sin((x + y) / 5)], -1)
+    pixels = np.where(truth[..., None], texture, background) + rng.normal(0, 4, (size, size, 3))
+    spot = np.hypot(x - 0.27 * size, y) < 3  # a dark spot on the object, like a shadow
+    pixels[spot] = background
+    return np.clip(pixels, 0, 255).astype(np.uint8), truth
+
+
+@pytest.mark.parametrize("background", [255, 0])
+def test_foreground_mask_matches_the_true_silhouette(background):
+    pixels, truth = _ring_object(background)
+    colour = objectbox.plain_colour(pixels)
+    np.testing.assert_allclose(colour, background, atol=6)
+    mask = objectbox.foreground_mask(pixels, colour)
+    assert (mask & truth).sum() / (mask | truth).sum() > 0.95
+    assert not mask[80, 80]  # the ring's hole is background ...
+    assert mask[80, 80 + int(0.27 * 160)]  # ... its small dark spot is object
+
+
+def test_foreground_mask_stays_in_the_region():
+    pixels, truth = _ring_object(255)
+    region = np.zeros_like(truth)
+    region[:, :80] = True
+    mask = objectbox.foreground_mask(pixels, objectbox.plain_colour(pixels), region)
+    assert not mask[:, 82:].any() and mask[:, :78].sum() > 0.9 * truth[:, :78].sum()
+
+
+def test_a_busy_background_gets_no_masks():
+    kermit = [np.asarray(Image.open(p)) for p in sorted(KERMIT.glob("*.jpg"))[:3]]
+    assert objectbox.plain_colour(kermit[0]) is None
+    assert objectbox.background_colour(kermit) is None
+
+
+def test_umeyama_recovers_a_similarity():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(20, 3))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    rot = q * np.sign(np.linalg.det(q))
+    dst = 2.5 * src @ rot.T + np.array([1.0, -2.0, 0.5])
+    scale, r, t = umeyama(src, dst)
+    assert scale == pytest.approx(2.5)
+    np.testing.assert_allclose(r, rot, atol=1e-9)
+    np.testing.assert_allclose(t, [1.0, -2.0, 0.5], atol=1e-9)
+
+
+def test_pose_errors_see_only_real_differences():
+    cams = _ring(n=8)
+    reference = {f"v{i}": c.c2w for i, c in enumerate(cams)}
+    world = np.eye(4)
+    world[:3, :3] = 0.3 * np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]])  # rotate and shrink ...
+    world[:3, 3] = [5.0, 1.0, -2.0]  # ... and move the whole world: no error
+    estimated = {k: c.transformed(world).c2w for k, c in zip(reference, cams)}
+    errors = pose_errors(estimated, reference)
+    assert errors.rotation_deg.max() < 1e-6 and errors.centre_share.max() < 1e-9
+    assert errors.radius == pytest.approx(4.0)
+    tilted = dict(estimated)
+    tilted["v3"] = estimated["v3"].copy()
+    tilted["v3"][:3, :3] = estimated["v3"][:3, :3] @ _rot_x(3.0)  # one camera turned 3 degrees
+    assert pose_errors(tilted, reference).rotation_deg[3] == pytest.approx(3.0, abs=1e-6)
+    assert rotation_angle(_rot_x(30.0)) == pytest.approx(30.0)
+
+
+def _rot_x(degrees: float) -> np.ndarray:
+    a = np.radians(degrees)
+    return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])

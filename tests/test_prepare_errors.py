@@ -1,0 +1,114 @@
+"""`prepare` on bad input: each failure says what is wrong and what to do, and writes nothing."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
+from windowshop.photos.prepare import check_out_dir, parse_intrinsics, prepare
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+KERMIT = DATA / "kermit"
+
+
+def _kermit(folder: Path, count: int) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for path in sorted(KERMIT.glob("*.jpg"))[:count]:
+        shutil.copyfile(path, folder / path.name)
+    return folder
+
+
+def _fails(source: Path, out: Path, match: str, **options) -> UserError:
+    with pytest.raises(UserError, match=match) as err:
+        prepare(source, out, PrepareOptions(max_side=320, **options), show=False)
+    assert not out.exists() or not any(out.iterdir())  # nothing half-written
+    return err.value
+
+
+def test_a_file_that_is_not_an_image(tmp_path):
+    photos = _kermit(tmp_path / "photos", 3)
+    (photos / "receipt.jpg").write_text("total: 12.50")
+    _fails(photos, tmp_path / "out", r"receipt\.jpg: not an image")
+
+
+def test_a_truncated_photo(tmp_path):
+    photos = _kermit(tmp_path / "photos", 3)
+    data = (KERMIT / "kermit005.jpg").read_bytes()
+    (photos / "half.jpg").write_bytes(data[: len(data) // 2])
+    _fails(photos, tmp_path / "out", r"half\.jpg: the image is truncated or damaged")
+
+
+def test_fewer_than_three_usable_photos(tmp_path):
+    photos = _kermit(tmp_path / "photos", 2)
+    shutil.copyfile(photos / "kermit000.jpg", photos / "kermit000_again.jpg")
+    err = _fails(photos, tmp_path / "out", r"only 2 usable photos; windowshop needs at least 3")
+    assert "kermit000_again.jpg: exact duplicate of kermit000.jpg" in str(err)
+
+
+def test_no_photos_at_all(tmp_path):
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "notes.txt").write_text("hello")
+    _fails(tmp_path / "photos", tmp_path / "out", r"no photos found")
+
+
+def test_photos_that_cannot_be_placed(tmp_path):
+    """Four photos of four different things share no view: nothing can be placed."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for source in [KERMIT / "kermit000.jpg", DATA / "temple_sparse" / "templeSR0001.png",
+                   DATA / "beer_can" / "images" / "0000.jpg", DATA / "lego" / "train" / "r_0.png"]:
+        Image.open(source).convert("RGB").save(photos / f"{source.parent.parent.name}_{source.stem}.png")
+    err = _fails(photos, tmp_path / "out", r"(?i)take more photos with overlap")
+    assert "could only place 0 of 4 photos" in str(err) and "data_kermit000.png" in str(err)
+
+
+def test_too_little_texture(tmp_path):
+    """A smooth grey object on a smooth background: no features to match."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    y, x = np.mgrid[0:240, 0:320]
+    for k in range(5):
+        blob = np.exp(-((x - 120 - 20 * k) ** 2 + (y - 120) ** 2) / 3000.0)
+        image = 90 + 100 * blob + 0.1 * x
+        Image.fromarray(np.stack([image] * 3, -1).astype(np.uint8)).save(photos / f"smooth{k}.png")
+    _fails(photos, tmp_path / "out", r"the background has too little texture")
+
+
+def test_unreadable_video(tmp_path):
+    (tmp_path / "walk.mp4").write_bytes(b"\x00" * 100)
+    _fails(tmp_path / "walk.mp4", tmp_path / "out", r"walk\.mp4: not a video we can read")
+
+
+def test_output_inside_the_input_is_refused(tmp_path):
+    photos = _kermit(tmp_path / "photos", 3)
+    _fails(photos, photos / "scene", r"must be outside the input")
+    assert sorted(p.name for p in photos.iterdir()) == ["kermit000.jpg", "kermit001.jpg", "kermit002.jpg"]
+
+
+def test_an_existing_output_folder(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep me")
+    with pytest.raises(UserError, match=r"already exists and is not empty.*--overwrite"):
+        check_out_dir(KERMIT, out, overwrite=False)
+    with pytest.raises(UserError, match=r"already exists"):
+        check_out_dir(KERMIT, out, overwrite=True)  # not an earlier prepare: never deleted
+    assert (out / "mine.txt").read_text() == "keep me"
+    (out / "mine.txt").unlink()
+    (out / "transforms.json").write_text(json.dumps({"frames": [], "windowshop": {}}))
+    (out / "images").mkdir()
+    check_out_dir(KERMIT, out, overwrite=True)  # an earlier prepare's output is replaced
+    assert not any(out.iterdir())
+
+
+@pytest.mark.parametrize("text", ["1,2,3", "a,b,c,d", "1,2,3,-4"])
+def test_bad_intrinsics(text):
+    with pytest.raises(UserError, match=r"four positive numbers"):
+        parse_intrinsics(text)

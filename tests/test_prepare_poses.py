@@ -1,0 +1,114 @@
+"""Recovered poses against published ones, after a similarity alignment (windowshop.photos.align):
+20 beer_can photos against its COLMAP model, and the Middlebury temple with known intrinsics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.config import PrepareOptions
+from windowshop.photos.align import pose_errors
+from windowshop.photos.prepare import prepare
+from windowshop.rays import project
+from windowshop.scene import read_source
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+MAX_ROTATION_DEG = 2.0
+MAX_CENTRE_SHARE = 0.02  # of the capture radius
+
+
+def _recovered(scene_dir: Path) -> dict[str, np.ndarray]:
+    meta = json.loads((scene_dir / "transforms.json").read_text())
+    return {Path(f["file_path"]).stem: np.array(f["transform_matrix"]) for f in meta["frames"]}
+
+
+def _reference(path: Path) -> dict[str, np.ndarray]:
+    return {f.image_path.stem: f.camera.c2w for f in read_source(path).frames}
+
+
+def beer_sample(count: int = 20) -> list[Path]:
+    """`count` beer_can photos spread evenly over the frames whose reference pose is trustworthy.
+
+    beer_can's own COLMAP model is not right everywhere: the can and the tiled floor look alike
+    from opposite sides, and after frames 13, 34 and 52 the model jumps the camera 11-16 times
+    its usual step between consecutive video frames (a run of frames placed on the mirror side).
+    Frames 12-19, 33-40 and 51-58 are left out, and so are the two frames whose own focal length
+    is off the model's median by more than 2% (0030 and 0044: their centres move along the axis).
+    """
+    doubtful = {i for jump in (13, 34, 52) for i in range(jump - 1, jump + 7)} | {30, 44}
+    frames = [i for i in range(71) if i not in doubtful]
+    picks = np.linspace(0, len(frames) - 1, count).round().astype(int)
+    return [DATA / "beer_can" / "images" / f"{frames[i]:04d}.jpg" for i in picks]
+
+
+@pytest.fixture(scope="module")
+def beer(tmp_path_factory):
+    photos = tmp_path_factory.mktemp("beer") / "photos"
+    photos.mkdir()
+    for path in beer_sample():
+        (photos / path.name).symlink_to(path)
+    return prepare(photos, photos.parent / "scene", PrepareOptions(max_side=640), show=False)
+
+
+def test_beer_can_20_photos_agree_with_its_colmap_model(beer):
+    assert beer.report["placed"] >= 18
+    errors = pose_errors(_recovered(beer.out_dir), _reference(DATA / "beer_can" / "sparse" / "0"))
+    assert len(errors.names) == beer.report["placed"]
+    assert errors.rotation_deg.max() < MAX_ROTATION_DEG, dict(zip(errors.names, errors.rotation_deg))
+    assert errors.centre_share.max() < MAX_CENTRE_SHARE, dict(zip(errors.names, errors.centre_share))
+
+
+def test_beer_can_has_no_masks_on_its_tiled_floor(beer):
+    assert not beer.report["masks"] and not (beer.out_dir / "masks").exists()
+
+
+def _temple_intrinsics() -> tuple[float, float, float, float]:
+    """fx, fy, cx, cy shared by every temple view, from its calibration file."""
+    rows = [line.split() for line in (DATA / "temple_sparse" / "templeSR_par.txt").read_text().splitlines()[1:]]
+    k = np.array([[float(v) for v in row[1:10]] for row in rows]).reshape(-1, 3, 3)
+    assert np.allclose(k, k[0])
+    return k[0, 0, 0], k[0, 1, 1], k[0, 0, 2], k[0, 1, 2]
+
+
+@pytest.fixture(scope="module")
+def temple(tmp_path_factory):
+    out = tmp_path_factory.mktemp("temple") / "scene"
+    options = PrepareOptions(max_side=640, intrinsics=_temple_intrinsics())
+    return prepare(DATA / "temple_sparse", out, options, show=False)
+
+
+def test_temple_with_known_intrinsics_is_one_model(temple):
+    report = temple.report
+    assert report["placed"] >= 13
+    assert report["attempts"][0]["label"] == "default"
+    errors = pose_errors(_recovered(temple.out_dir), _reference(DATA / "temple_sparse"))
+    assert len(errors.names) == report["placed"]  # every placed view is in the one model
+    assert errors.rotation_deg.max() < MAX_ROTATION_DEG
+    assert errors.centre_share.max() < MAX_CENTRE_SHARE
+
+
+def test_temple_intrinsics_are_kept(temple):
+    meta = json.loads((temple.out_dir / "transforms.json").read_text())
+    fx, fy, cx, cy = _temple_intrinsics()
+    assert (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]) == pytest.approx((fx, fy, cx, cy))
+    assert "k1" not in meta
+
+
+def test_temple_masks_lie_on_the_temple(temple):
+    """The masks (black background) fall inside the temple's published bounding box as each
+    calibrated camera sees it, and cover a good part of it."""
+    assert temple.report["masks"] and temple.report["background"] == "black"
+    lo = np.array([-0.073568, 0.021728, -0.012445])
+    hi = np.array([0.028855, 0.181892, 0.062736])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    for frame in read_source(DATA / "temple_sparse").frames:
+        mask = np.asarray(Image.open(temple.out_dir / "masks" / f"{frame.image_path.stem}.png")) > 127
+        uv, _ = project(corners, frame.camera)
+        (u0, v0), (u1, v1) = np.floor(uv.min(0)).astype(int) - 3, np.ceil(uv.max(0)).astype(int) + 3
+        inside = mask[max(v0, 0):v1, max(u0, 0):u1].sum()
+        assert inside >= 0.98 * mask.sum()
+        assert mask.sum() >= 0.25 * (v1 - v0) * (u1 - u0)

@@ -1,0 +1,33 @@
+"""Slow: a seller's photos (kermit, 11 unposed JPEGs) through the live service, prepare included."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import httpx
+import pytest
+
+from service_helpers import FAST_JOB, LiveService
+
+KERMIT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kermit"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not KERMIT.is_dir(), reason=f"{KERMIT} is absent")
+def test_photos_become_a_turntable(tmp_path):
+    service = LiveService(tmp_path / "data").start()
+    try:
+        photos = sorted(KERMIT.glob("*.jpg"))
+        files = [("files", (p.name, p.read_bytes(), "image/jpeg")) for p in photos]
+        r = httpx.post(f"{service.url}/api/jobs", files=files, timeout=120)
+        assert r.status_code == 201, r.text
+        job_id = r.json()["id"]
+        assert service.wait_for(job_id, ("preparing",))["input"] == "11 photos"
+        status = service.wait_for(job_id, ("done", "failed"), timeout=600)
+        assert status["state"] == "done", status["error"]
+        assert status["stages"] == {"preparing": 1.0, "training": 1.0, "rendering": 1.0}
+        assert len(status["links"]["frames"]) == int(FAST_JOB["WINDOWSHOP_FRAMES"])
+        video = httpx.get(service.url + status["links"]["video"])
+        assert video.status_code == 200 and video.content[4:8] == b"ftyp"
+    finally:
+        service.stop()

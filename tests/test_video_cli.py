@@ -1,0 +1,84 @@
+"""`windowshop video` / `make_video`: input -> prepare -> fit -> render, with stage reports."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from windowshop.cli import main
+from windowshop.errors import UserError
+from windowshop.pipeline import VideoSettings, is_posed_scene, make_video
+from windowshop.scene.synthetic import synthetic_scene
+from windowshop.scene.writer import write_transforms
+from windowshop.video.encode import probe_video
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+TINY = VideoSettings(train_seconds=None, train_steps=4, train_side=32, frames=4, frame_size=32)
+
+
+@pytest.fixture(scope="module")
+def posed(tmp_path_factory):
+    """A small posed scene on disk (the built-in object, written as transforms.json)."""
+    folder = tmp_path_factory.mktemp("posed")
+    write_transforms(synthetic_scene(n_train=8, n_test=1, size=32), folder)
+    return folder
+
+
+def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
+    calls = []
+    result = make_video(posed, tmp_path / "spin.mp4", TINY, frames_dir=tmp_path / "frames",
+                        on_stage=lambda stage, fraction: calls.append((stage, fraction)), show=False)
+    stages = [s for i, (s, _) in enumerate(calls) if i == 0 or calls[i - 1][0] != s]
+    assert stages == ["fit", "render"]
+    assert all(0.0 <= f <= 1.0 for _, f in calls)
+    for stage in stages:
+        fractions = [f for s, f in calls if s == stage]
+        assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert len([f for s, f in calls if s == "render"]) >= TINY.frames
+    video = probe_video(result.mp4)
+    assert (video["frames"], video["width"], video["height"]) == (4, 32, 32)
+    assert result.poster.is_file() and len(list((tmp_path / "frames").glob("*.jpg"))) == 4
+    assert set(result.seconds) == {"fit", "render"} and result.scene_dir == posed
+    assert json.loads((tmp_path / "spin_work" / "video.json").read_text())["mp4"] == str(result.mp4)
+
+
+def test_cli_video_prints_each_stage(posed, tmp_path, capsys):
+    code = main(["video", str(posed), "--out", str(tmp_path / "out.mp4"), "--iters", "3",
+                 "--frames", "3", "--size", "32"])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "fit: " in err and "render: " in err and "wrote" in err
+    assert probe_video(tmp_path / "out.mp4")["frames"] == 3
+
+
+def test_a_foreign_work_folder_is_never_emptied(posed, tmp_path):
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "thesis.tex").write_text("precious")
+    with pytest.raises(UserError, match=r"not from `windowshop video`"):
+        make_video(posed, tmp_path / "x.mp4", TINY, work_dir=work, show=False)
+    assert (work / "thesis.tex").read_text() == "precious"
+
+
+def test_what_counts_as_posed(posed):
+    assert is_posed_scene(posed) and is_posed_scene(DATA / "temple_sparse")
+    assert not is_posed_scene(DATA / "kermit") and not is_posed_scene(DATA / "beer_can" / "Beer.mp4")
+
+
+@pytest.mark.slow
+def test_beer_video_to_turntable(tmp_path, capsys):
+    """Beer.mp4 -> 40 frames -> poses -> fit -> a playable turntable (several minutes on a CPU)."""
+    out = tmp_path / "beer.mp4"
+    code = main(["video", str(DATA / "beer_can" / "Beer.mp4"), "--out", str(out), "--seconds", "60",
+                 "--frames", "24", "--size", "128"])
+    assert code == 0
+    report = json.loads((tmp_path / "beer_work" / "scene" / "report.json").read_text())
+    assert report["kind"] == "video" and report["placed"] >= 0.8 * report["used"]
+    video = probe_video(out)
+    assert (video["frames"], video["width"], video["height"]) == (24, 128, 128)
+    assert (tmp_path / "beer_poster.jpg").is_file()
+    err = capsys.readouterr().err
+    assert all(f"{stage}: " in err for stage in ("prepare", "fit", "render"))
+

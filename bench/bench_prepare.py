@@ -47,7 +47,8 @@ def timed_prepare(source: Path, out: Path, options: PrepareOptions) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max-side", type=int, default=640)
-    parser.add_argument("--video", action="store_true", help="also time `windowshop video` on 20 photos")
+    parser.add_argument("--video", action="store_true",
+                        help="also time `windowshop video` on the 20 photos")
     parser.add_argument("--out", default=None, help="also write the JSON here")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
@@ -61,9 +62,11 @@ def main() -> None:
             (photos / path.name).symlink_to(path)
         results["beer_can_20"] = timed_prepare(photos, tmp / "beer", options)
         meta = json.loads((tmp / "beer" / "transforms.json").read_text())
-        errors = pose_errors({Path(f["file_path"]).stem: np.array(f["transform_matrix"]) for f in meta["frames"]},
-                             {f.image_path.stem: f.camera.c2w
-                              for f in read_source(DATA / "beer_can" / "sparse" / "0").frames})
+        recovered = {Path(f["file_path"]).stem: np.array(f["transform_matrix"])
+                     for f in meta["frames"]}
+        reference = {f.image_path.stem: f.camera.c2w
+                     for f in read_source(DATA / "beer_can" / "sparse" / "0").frames}
+        errors = pose_errors(recovered, reference)
         results["beer_can_20"].update(max_rotation_deg=round(float(errors.rotation_deg.max()), 3),
                                       max_centre_share=round(float(errors.centre_share.max()), 4))
         if args.video:
@@ -75,7 +78,8 @@ def main() -> None:
             video = make_video(photos, tmp / "spin.mp4", settings, device=pick_device(), show=False)
             results["video_beer_can_20"] = {
                 "seconds": {k: round(v, 2) for k, v in video.seconds.items()},
-                "total_seconds": round(time.perf_counter() - start, 2), "device": str(pick_device()),
+                "total_seconds": round(time.perf_counter() - start, 2),
+                "device": str(pick_device()),
                 "model": settings.model, "train_seconds": settings.train_seconds,
                 "frames": settings.frames, "frame_size": settings.frame_size,
                 "held_out_psnr": video.metrics.get("psnr")}

@@ -61,7 +61,8 @@ def _ring_object(background: int, size: int = 160) -> tuple[np.ndarray, np.ndarr
     y, x = np.mgrid[0:size, 0:size] - size / 2
     r = np.hypot(x, y)
     truth = (r < 0.4 * size) & (r > 0.15 * size)
-    texture = np.stack([128 + 60 * np.sin(x / 3), 128 + 60 * np.cos(y / 4), 128 + 40 * np.sin((x + y) / 5)], -1)
+    texture = np.stack([128 + 60 * np.sin(x / 3), 128 + 60 * np.cos(y / 4),
+                        128 + 40 * np.sin((x + y) / 5)], -1)
     pixels = np.where(truth[..., None], texture, background) + rng.normal(0, 4, (size, size, 3))
     spot = np.hypot(x - 0.27 * size, y) < 3  # a dark spot on the object, like a shadow
     pixels[spot] = background

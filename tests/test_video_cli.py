@@ -29,7 +29,8 @@ def posed(tmp_path_factory):
 def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
     calls = []
     result = make_video(posed, tmp_path / "spin.mp4", TINY, frames_dir=tmp_path / "frames",
-                        on_stage=lambda stage, fraction: calls.append((stage, fraction)), show=False)
+                        on_stage=lambda stage, fraction: calls.append((stage, fraction)),
+                        show=False)
     stages = [s for i, (s, _) in enumerate(calls) if i == 0 or calls[i - 1][0] != s]
     assert stages == ["fit", "render"]
     assert all(0.0 <= f <= 1.0 for _, f in calls)
@@ -64,7 +65,8 @@ def test_a_foreign_work_folder_is_never_emptied(posed, tmp_path):
 
 def test_what_counts_as_posed(posed):
     assert is_posed_scene(posed) and is_posed_scene(DATA / "temple_sparse")
-    assert not is_posed_scene(DATA / "kermit") and not is_posed_scene(DATA / "beer_can" / "Beer.mp4")
+    assert not is_posed_scene(DATA / "kermit")
+    assert not is_posed_scene(DATA / "beer_can" / "Beer.mp4")
 
 
 @pytest.mark.slow

@@ -66,7 +66,10 @@ def evaluate_views(model: RadianceModel, views: list[View], background: str, chu
         per_view.append({"name": view.name, "psnr": psnr(frame.rgb, truth), "ssim": ssim(frame.rgb, truth)})
         if image_dir is not None:
             Image.fromarray(comparison_image(truth, frame.rgb)).save(image_dir / image_name(index, view))
-    mean = (lambda key: float(np.mean([v[key] for v in per_view]))) if per_view else (lambda key: None)
+
+    def mean(key: str) -> float | None:
+        return float(np.mean([v[key] for v in per_view])) if per_view else None
+
     return {"psnr": mean("psnr"), "ssim": mean("ssim"), "test_views": len(views),
             "per_view": per_view, "eval_seconds": time.perf_counter() - start}
 
@@ -80,9 +83,15 @@ def mean_color_psnr(train: list[View], test: list[View], background: str) -> flo
 
 def write_metrics(run_dir: Path, metrics: dict) -> Path:
     """metrics.json, with non-finite numbers (a perfect PSNR) written as null."""
-    clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in metrics.items()}
+    def clean(value):
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [clean(v) for v in value]
+        return None if isinstance(value, float) and not math.isfinite(value) else value
+
     path = Path(run_dir) / METRICS
-    path.write_text(json.dumps(clean, indent=2) + "\n")
+    path.write_text(json.dumps(clean(metrics), indent=2, allow_nan=False) + "\n")
     return path
 
 

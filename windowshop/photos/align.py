@@ -52,7 +52,8 @@ def pose_errors(estimated: dict[str, np.ndarray], reference: dict[str, np.ndarra
     scale, rot, t = umeyama(est[:, :3, 3], ref[:, :3, 3])
     centres = scale * est[:, :3, 3] @ rot.T + t
     radius = float(np.median(np.linalg.norm(ref[:, :3, 3] - nearest_point_to_axes(ref), axis=-1)))
-    rotation = np.array([rotation_angle(r.T @ rot @ e) for r, e in zip(ref[:, :3, :3], est[:, :3, :3])])
+    rotation = np.array([rotation_angle(r.T @ rot @ e)
+                         for r, e in zip(ref[:, :3, :3], est[:, :3, :3])])
     return PoseErrors(names=names, rotation_deg=rotation,
                       centre_share=np.linalg.norm(centres - ref[:, :3, 3], axis=-1) / radius,
                       radius=radius)

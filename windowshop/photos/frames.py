@@ -22,7 +22,8 @@ def _open(path: Path):
         frames = imageio_ffmpeg.read_frames(str(path))
         meta = next(frames)
     except (OSError, RuntimeError, StopIteration) as err:
-        raise UserError(f"{path}: not a video we can read ({err}); export it as MP4 (H.264)") from err
+        raise UserError(f"{path}: not a video we can read ({err}); "
+                        f"export it as MP4 (H.264)") from err
     return meta, frames
 
 
@@ -33,7 +34,8 @@ def _shrink(frame: np.ndarray, max_side: int | None) -> tuple[np.ndarray, float]
     if scale == 1.0:
         return frame, 1.0
     size = (max(1, round(width * scale)), max(1, round(height * scale)))
-    return np.asarray(Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS)), size[0] / width
+    shrunk = Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS)
+    return np.asarray(shrunk), size[0] / width
 
 
 def sample_frames(path: str | Path, count: int, max_side: int | None,
@@ -46,7 +48,7 @@ def sample_frames(path: str | Path, count: int, max_side: int | None,
     path = Path(path)
     meta, frames = _open(path)
     width, height = meta["size"]
-    expected = int(round(float(meta.get("duration") or 0) * float(meta.get("fps") or 0)))
+    expected = round(float(meta.get("duration") or 0) * float(meta.get("fps") or 0))
     if expected < count:  # no usable duration in the header: count the frames (a fast decode)
         expected = imageio_ffmpeg.count_frames_and_secs(str(path))[0]
     expected = max(expected, 1)

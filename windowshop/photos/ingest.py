@@ -83,7 +83,8 @@ def _unzip(archive: Path, scratch: Path) -> Path:
                     n += 1
                 target.write_bytes(zf.read(info))
     except zipfile.BadZipFile as err:
-        raise UserError(f"{archive}: not a readable zip file ({err}); zip the photos again") from err
+        raise UserError(f"{archive}: not a readable zip file ({err}); "
+                        f"zip the photos again") from err
     return out
 
 
@@ -103,7 +104,8 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
         raise UserError(f"{path}: not a photo, a video, or a folder or zip of photos "
                         f"(photos: {', '.join(sorted(IMAGE_SUFFIXES))}; "
                         f"videos: {', '.join(sorted(VIDEO_SUFFIXES))})")
-    entries = sorted(p for p in path.iterdir() if p.is_file() and not _is_hidden(p.relative_to(path)))
+    entries = sorted(p for p in path.iterdir()
+                     if p.is_file() and not _is_hidden(p.relative_to(path)))
     photos = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
     videos = [p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES]
     if not photos and len(videos) == 1:

@@ -34,7 +34,8 @@ def seen_counts(points: np.ndarray, cameras: list[Camera], inner: float = INNER)
     counts = np.zeros(len(points), dtype=np.int64)
     for cam in cameras:
         uv, depth = project(points, cam)
-        inside = ((depth > 0) & (uv[:, 0] >= inner * cam.width) & (uv[:, 0] <= (1 - inner) * cam.width)
+        inside = ((depth > 0)
+                  & (uv[:, 0] >= inner * cam.width) & (uv[:, 0] <= (1 - inner) * cam.width)
                   & (uv[:, 1] >= inner * cam.height) & (uv[:, 1] <= (1 - inner) * cam.height))
         counts += inside
     return counts
@@ -78,7 +79,8 @@ def box_region(lo: np.ndarray, hi: np.ndarray, camera: Camera, to_world: np.ndar
                margin: float = 0.05) -> np.ndarray:
     """(H, W) bool: the image rectangle around the box [lo, hi] (given in the frame that
     `to_world` (4, 4) takes to the camera's world), grown by `margin` of the image size."""
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
     corners = corners @ to_world[:3, :3].T + to_world[:3, 3]
     uv, depth = project(corners, camera)
     region = np.zeros((camera.height, camera.width), dtype=bool)

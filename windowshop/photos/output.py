@@ -68,7 +68,8 @@ def write_transforms_json(out_dir: Path, photos: list[PosedPhoto], transform: np
         if masks:
             frame["mask_path"] = f"masks/{p.name}.png"
         frames.append(frame if shared else {**frame, **_intrinsics(p)})
-    meta = {"camera_model": "OPENCV", **(_intrinsics(photos[0]) if shared else {}), "frames": frames,
+    meta = {"camera_model": "OPENCV", **(_intrinsics(photos[0]) if shared else {}),
+            "frames": frames,
             WRITER_KEY: {"transform": transform.tolist(), "aabb": aabb.tolist(),
                          "near": near_far[0], "far": near_far[1], "background": background,
                          "source": source, "format": "photos"}}

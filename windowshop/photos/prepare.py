@@ -25,8 +25,15 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos import objectbox, output, report
 from windowshop.photos.frames import sample_frames
-from windowshop.photos.ingest import (VIDEO_SUFFIXES, Dropped, Inputs, Photo, check_enough,
-                                      gather_inputs, read_photos)
+from windowshop.photos.ingest import (
+    VIDEO_SUFFIXES,
+    Dropped,
+    Inputs,
+    Photo,
+    check_enough,
+    gather_inputs,
+    read_photos,
+)
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
@@ -115,14 +122,16 @@ def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
     image file names to the names the user knows (their files)."""
     poor = sorted(shown[name] for name, k in sfm.keypoints.items() if k < MIN_KEYPOINTS)
     texture = (f"the background has too little texture: fewer than {MIN_KEYPOINTS} features in "
-               f"{len(poor)} of {count} photos ({', '.join(poor[:10])}{' ...' if len(poor) > 10 else ''}); "
+               f"{len(poor)} of {count} photos ({', '.join(poor[:10])}"
+               f"{' ...' if len(poor) > 10 else ''}); "
                f"photograph the object on a patterned surface (a newspaper, a printed cloth) "
                f"with detail around it")
     if count - len(poor) < 3:
         raise UserError(texture)
     if len(sfm.placed) >= max(3, math.ceil(MIN_PLACED_SHARE * count)):
         return
-    names = ", ".join(shown[n] for n in sfm.unplaced[:20]) + (" ..." if len(sfm.unplaced) > 20 else "")
+    names = ", ".join(shown[n] for n in sfm.unplaced[:20])
+    names += " ..." if len(sfm.unplaced) > 20 else ""
     raise UserError(f"could only place {len(sfm.placed)} of {count} photos; not placed: {names}. "
                     f"Take more photos with overlap: walk around the object in small steps "
                     f"(10-15 degrees) so that each photo shares most of its view with the next"
@@ -164,15 +173,16 @@ def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, sourc
     for p in found.photos:
         shutil.copyfile(image_dir / p.image_name, out_dir / "images" / f"{p.name}.jpg")
         if found.masks:
-            objectbox.mask_image(found.masks[p.name]).save(out_dir / "masks" / f"{p.name}.png")
+            mask = objectbox.mask_image(found.masks[p.name])
+            mask.save(out_dir / "masks" / f"{p.name}.png")
         advance(1)
     (out_dir / "colmap").mkdir(exist_ok=True)
     sfm.reconstruction.write(out_dir / "colmap")
     near_far = normalize.near_far(np.stack([p.camera.center for p in found.photos]), found.aabb)
     report.plot_cameras(out_dir / "cameras.png", [p.camera for p in found.photos], found.aabb,
                         found.points)
-    return output.write_transforms_json(out_dir, found.photos, found.transform, found.aabb, near_far,
-                                        found.background, bool(found.masks), str(source))
+    return output.write_transforms_json(out_dir, found.photos, found.transform, found.aabb,
+                                        near_far, found.background, bool(found.masks), str(source))
 
 
 def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
@@ -183,7 +193,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
         "unplaced": [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced],
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
-        "points": int(sfm.reconstruction.num_points3D()), "object_points": int(len(found.points)),
+        "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
         "attempts": [vars(a) for a in sfm.attempts], "masks": bool(found.masks),
         "background": found.background, "aabb": found.aabb.tolist(),

@@ -21,8 +21,8 @@ def write_report(out_dir: Path, report: dict) -> Path:
 
 def summary_lines(report: dict) -> list[str]:
     """A few lines for the terminal."""
-    lines = [f"placed {report['placed']} of {report['used']} photos "
-             f"(mean reprojection error {report['reprojection_error_px']:.2f} px)"]
+    lines = [(f"placed {report['placed']} of {report['used']} photos "
+              f"(mean reprojection error {report['reprojection_error_px']:.2f} px)")]
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
     if report["unplaced"]:
         lines.append(f"  could not place: {', '.join(report['unplaced'])}")

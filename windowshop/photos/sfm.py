@@ -104,7 +104,8 @@ def match(database: Path, settings: SfmSettings) -> None:
 
 
 def mapping_options(settings: SfmSettings, relaxed: bool) -> pycolmap.IncrementalPipelineOptions:
-    """The incremental mapper's options; `relaxed` lowers what it needs to start and grow a model."""
+    """The incremental mapper's options; `relaxed` lowers what it needs to start and grow
+    a model."""
     options = pycolmap.IncrementalPipelineOptions()
     options.random_seed = settings.seed
     options.mapper.random_seed = settings.seed
@@ -134,7 +135,8 @@ def map_once(database: Path, image_dir: Path, out: Path, settings: SfmSettings, 
         initial_image_pair_callback=lambda: advance(2), next_image_callback=lambda: advance(1))
     if not models:
         return None
-    return max(models.values(), key=lambda r: (r.num_reg_images(), -r.compute_mean_reprojection_error()))
+    return max(models.values(),
+               key=lambda r: (r.num_reg_images(), -r.compute_mean_reprojection_error()))
 
 
 def _placed(model: pycolmap.Reconstruction | None) -> int:
@@ -167,7 +169,8 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                 match(database, settings)
         with stages.stage("placing cameras" + ("" if i == 0 else f" ({label})"),
                           len(names)) as advance:
-            model = map_once(database, image_dir, work / f"sparse_{label}", settings, relaxed, advance)
+            model = map_once(database, image_dir, work / f"sparse_{label}", settings, relaxed,
+                             advance)
         attempts.append(Attempt(label, _placed(model), time.perf_counter() - start))
         if _placed(model) > _placed(best):
             best = model

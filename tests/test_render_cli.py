@@ -15,9 +15,10 @@ from windowshop.config import FitConfig, VideoOptions
 from windowshop.demo import demo_scene
 from windowshop.model import Bounds, RadianceModel, RenderOutput, model_config
 from windowshop.scene.synthetic import orbit_cameras
+from windowshop.scene.types import Camera
 from windowshop.video.encode import VideoOutputs, read_video
 from windowshop.video.paths import read_camera_path, turntable_path, write_camera_path
-from windowshop.video.turntable import render_turntable
+from windowshop.video.turntable import depth_range, render_turntable
 
 RED = (0.9, 0.1, 0.1)
 
@@ -78,6 +79,15 @@ def test_sphere_stays_centred_and_the_same_size_in_every_frame(tmp_path):
     assert depth[24, 32].sum() > 200 and depth[2, 2].sum() < 10  # a bright surface on black
 
 
+def test_depth_range_spans_the_box_as_the_path_sees_it():
+    cameras = [Camera(10.0, 10.0, 8.0, 8.0, 16, 16, np.eye(4)) for _ in range(2)]
+    cameras[0].c2w[:3, 3], cameras[1].c2w[:3, 3] = [5.0, 0.0, 0.0], [0.0, -4.0, 0.0]
+    box = ((-1.0,) * 3, (1.0,) * 3)
+    near, far = depth_range(cameras, Bounds(aabb=box, near=0.1, far=100.0))
+    assert near == pytest.approx(3.0) and far == pytest.approx(np.sqrt(38.0))  # face, far corner
+    assert depth_range(cameras, Bounds(aabb=box, near=3.5, far=5.0)) == (3.5, 5.0)  # rays stop there
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     """A briefly trained tiny NeRF of the built-in object (only its rendering is under test)."""
@@ -133,6 +143,7 @@ def test_render_cli_spiral(run_dir, tmp_path):
 
 
 @pytest.mark.parametrize("extra,message", [(["--size", "33"], "even"), (["--size", "big"], "--size"),
+                                           (["--fps", "0"], "--fps"),
                                            (["--path", "nowhere.json"], "nowhere.json"),
                                            (["--frames", "0"], "--frames")])
 def test_render_cli_bad_input_is_a_clear_error(run_dir, tmp_path, capsys, extra, message):

@@ -111,13 +111,13 @@ def cmd_render(args: argparse.Namespace) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> None:
     from windowshop.config import FitConfig
-    from windowshop.demo import DEMO_ITERS, DemoOptions, demo_command
+    from windowshop.demo import DEMO_SECONDS, DemoOptions, demo_command
     from windowshop.device import pick_device
 
-    budget = {"iters": args.iters, "seconds": args.seconds} if args.iters or args.seconds else {
-        "iters": DEMO_ITERS}
-    options = DemoOptions(views=args.views, image_size=args.image_size, frames=args.frames,
-                          video_size=args.size)
+    budget = {"iters": args.iters, "seconds": args.seconds or (None if args.iters else DEMO_SECONDS)}
+    sizes = {"views": args.views, "image_size": args.image_size, "frames": args.frames,
+             "video_size": args.size}
+    options = DemoOptions(**{k: v for k, v in sizes.items() if v is not None})
     demo_command(args.out, args.model, args.preset, FitConfig(**budget), options,
                  pick_device(args.device))
 
@@ -161,7 +161,29 @@ def cmd_serve(args: argparse.Namespace) -> None:
 
     flags = {"host": args.host, "port": args.port, "data_dir": args.data,
              "concurrency": args.concurrency, "device": args.device}
-    serve(ServiceSettings(**{k: v for k, v in flags.items() if v is not None}))
+    settings = ServiceSettings(**{k: v for k, v in flags.items() if v is not None})
+    if args.broker is None:
+        serve(settings)
+        return
+    from windowshop.distributed.celery_app import ClusterSettings
+    from windowshop.distributed.service import serve_cluster
+
+    cluster = {"broker": args.broker, "db": args.db, "public_url": args.public_url}
+    serve_cluster(settings, ClusterSettings(**{k: v for k, v in cluster.items() if v is not None}))
+
+
+def cmd_worker(args: argparse.Namespace) -> None:
+    from windowshop.distributed.celery_app import QUEUES, ClusterSettings
+    from windowshop.distributed.tasks import run_worker
+
+    queues = [q.strip() for q in args.queues.split(",") if q.strip()] if args.queues else None
+    if queues is None:
+        import torch
+
+        queues = ["cpu", "gpu"] if torch.cuda.is_available() else ["cpu"]
+    if unknown := sorted(set(queues) - set(QUEUES)):
+        raise UserError(f"--queues: unknown queue(s) {', '.join(unknown)}; use cpu and/or gpu")
+    run_worker(ClusterSettings(broker=args.broker), queues, args.concurrency, args.name, args.device)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -204,12 +226,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", default=DEFAULT_MODEL, help="registered model name (nerf, fast)")
     p.add_argument("--preset", default=None, help="named settings of the model")
     budget = p.add_mutually_exclusive_group()
-    budget.add_argument("--iters", type=int, default=None, help="training steps (default: the demo's)")
-    budget.add_argument("--seconds", type=float, default=None, help="or seconds of training")
-    p.add_argument("--views", type=int, default=40, help="training views of the object")
-    p.add_argument("--image-size", type=int, default=64, help="pixels a side of the training views")
-    p.add_argument("--frames", type=int, default=60, help="turntable frames")
-    p.add_argument("--size", type=int, default=128, help="pixels a side of the turntable")
+    budget.add_argument("--iters", type=int, default=None, help="training steps")
+    budget.add_argument("--seconds", type=float, default=None,
+                        help="or seconds of training (default: 120)")
+    p.add_argument("--views", type=int, help="training views of the object (default: 40)")
+    p.add_argument("--image-size", type=int, help="pixels a side of the training views (default: 64)")
+    p.add_argument("--frames", type=int, help="turntable frames (default: 60)")
+    p.add_argument("--size", type=int, help="pixels a side of the turntable (default: 128)")
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
     p.set_defaults(func=cmd_demo)
 
@@ -288,7 +311,24 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "(default ./windowshop-data)")
     p.add_argument("--concurrency", type=int, default=None, help="jobs run at once (default 1)")
     p.add_argument("--device", default=None, help="the jobs' device: cpu, cuda (default: CUDA if present)")
+    p.add_argument("--broker", default=None, metavar="URL", help="send jobs to the workers of this "
+                   "Redis broker (redis://HOST:6379/0) instead of the local worker (docs/scaling.md)")
+    p.add_argument("--db", default=None, metavar="URL", help="with --broker: the job store's "
+                   "SQLAlchemy URL, e.g. postgresql://... (default: SQLite in --data)")
+    p.add_argument("--public-url", default=None, help="with --broker: how workers reach this "
+                   "service (default http://HOST:PORT)")
     p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("worker", help="run jobs and study runs sent through a Redis broker",
+                       description="A Celery worker; it needs the broker and the service's address "
+                                   "(sent with every job), no shared disk. See docs/scaling.md.")
+    p.add_argument("--broker", required=True, metavar="URL", help="redis://HOST:6379/0")
+    p.add_argument("--queues", default=None, help="cpu, gpu or cpu,gpu (default: cpu,gpu with "
+                                                  "CUDA, else cpu)")
+    p.add_argument("--concurrency", type=int, default=1, help="tasks run at once (processes)")
+    p.add_argument("--name", default=None, help="worker name, e.g. gpu1@%%h (default celery@HOST)")
+    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
+    p.set_defaults(func=cmd_worker)
     return parser
 
 

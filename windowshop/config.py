@@ -58,8 +58,10 @@ class FastConfig:
     into colour. Samples are marched only through occupied cells; the grids grow coarse to fine.
     Sizes are in voxels of the box, so they mean the same for any scene."""
 
-    voxels: int = 128**3  # grid vertices at the end of the growth
-    voxels_start: int = 48**3  # ... and at the start
+    voxels: int | None = None  # voxels at the end of the growth; None: from the pixel size (below)
+    voxel_pixels: float = 1.0  # ... so that a voxel is this many training pixels wide at the object
+    max_voxels: int = 160**3  # ... but no more than this (memory and time)
+    start_fraction: float = 0.125  # voxels at the start, as a fraction of the final count
     growth: tuple[float, ...] = (0.1, 0.2, 0.3)  # progress at which the grid grows (geometrically)
     features: int = 16  # channels of the feature grid (16 floats: one cache line per vertex)
     hidden: int = 64  # width of the colour MLP's one hidden layer
@@ -70,7 +72,7 @@ class FastConfig:
     lr_grid: float = 0.1  # Adam on both grids ...
     lr_mlp: float = 3e-3  # ... and on the MLP
     lr_final: float = 0.1  # learning rates decay exponentially to this factor
-    occupancy_warmup: int = 16  # steps before empty cells are first skipped
+    occupancy_warmup: int = 64  # steps before empty cells are first skipped
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
     weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated

@@ -59,6 +59,12 @@ class RadianceModel(nn.Module):
         self.config = config
         self.bounds = bounds
 
+    @classmethod
+    def for_scene(cls, config: Any, scene) -> Any:
+        """`config` with any choices it leaves to the training scene filled in (e.g. a grid sized
+        to the photos' resolution). The trainer calls this once; the run stores the result."""
+        return config
+
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
                     background: torch.Tensor) -> RenderOutput:
         """Render rays `origins` (R, 3), unit `directions` (R, 3) over `background` (R, 3)."""

@@ -11,7 +11,9 @@ occupancy grid is the set of cells with a corner dense enough to matter, refresh
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -22,6 +24,9 @@ from windowshop.field.occupancy import OccupancyGrid
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.packed import packed_weights, ray_sum
+
+DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
+MIN_VOXELS = 16**3
 
 
 def lattice_shape(extent: torch.Tensor, voxels: int) -> tuple[int, int, int]:
@@ -48,6 +53,13 @@ def spherical_harmonics(d: torch.Tensor, degree: int) -> torch.Tensor:
     return torch.stack(out, dim=-1)
 
 
+def pixel_footprint(scene) -> float:
+    """Median width of a training pixel at the centre of the scene's box, in scene units."""
+    centre = np.mean(np.asarray(scene.aabb, dtype=float), axis=0)
+    sizes = [np.linalg.norm(v.camera.center - centre) / v.camera.fx for v in scene.split("train")]
+    return float(np.median(sizes))
+
+
 class FastModel(RadianceModel):
     """Grids + tiny MLP + occupancy skipping; see the module docstring."""
 
@@ -55,12 +67,23 @@ class FastModel(RadianceModel):
     config_type = FastConfig
     presets = FAST_PRESETS
 
+    @classmethod
+    def for_scene(cls, config: FastConfig, scene) -> FastConfig:
+        """Fill in the voxel count from the training pixels' size: finer photos, finer grid."""
+        if config.voxels is not None:
+            return config
+        extent = np.diff(np.asarray(scene.aabb, dtype=float), axis=0)[0]
+        voxel = pixel_footprint(scene) * config.voxel_pixels
+        voxels = min(config.max_voxels, int(np.prod(extent) / voxel**3))
+        return replace(config, voxels=max(voxels, MIN_VOXELS))
+
     def __init__(self, config: FastConfig, bounds: Bounds):
         super().__init__(config, bounds)
         aabb = bounds.aabb_tensor()
         self.extent = aabb[1] - aabb[0]
-        shape = lattice_shape(self.extent, config.voxels_start)
-        final_voxel = float(torch.prod(self.extent) / config.voxels) ** (1.0 / 3.0)
+        self.voxels = config.voxels or DEFAULT_VOXELS
+        shape = self.target_shape(0.0)
+        final_voxel = float(torch.prod(self.extent) / self.voxels) ** (1.0 / 3.0)
         self.density_scale = 1.0 / final_voxel  # softplus units are "per final voxel"
         # initial opacity alpha_init over one final-resolution step (config.step voxels)
         self.shift = 0.0
@@ -136,11 +159,10 @@ class FastModel(RadianceModel):
 
     def target_shape(self, progress: float) -> tuple[int, int, int]:
         """The lattice for `progress`: voxels grow geometrically at each `growth` point passed."""
-        cfg = self.config
-        stages = len(cfg.growth)
-        done = sum(progress >= p for p in cfg.growth)
-        voxels = cfg.voxels_start * (cfg.voxels / cfg.voxels_start) ** (done / stages) if stages else cfg.voxels
-        return lattice_shape(self.extent, round(voxels))
+        growth = self.config.growth
+        done = sum(progress >= p for p in growth)
+        fraction = self.config.start_fraction ** (1.0 - done / len(growth)) if growth else 1.0
+        return lattice_shape(self.extent, round(self.voxels * fraction))
 
     def before_step(self, step: int, progress: float) -> None:
         shape = self.target_shape(progress)

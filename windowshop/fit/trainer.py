@@ -78,6 +78,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(fit_config.seed)
+    model_config = model_class(model_name).for_scene(model_config, scene)
     model = model_class(model_name)(model_config, Bounds.of_scene(scene)).to(device)
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:

@@ -22,6 +22,9 @@ from windowshop.photos.progress import Stages
 MIN_KEYPOINTS = 80  # fewer SIFT features than this in a photo: too little texture to place it
 DENSE_PEAK = 0.002  # SIFT peak threshold of the dense retry (COLMAP's default is 0.0067)
 DENSE_RETRY_BELOW = 0.9  # the dense retry runs only when fewer than this share are placed
+# Video frames are matched with this many next frames only: frames far apart on a walk around a
+# symmetric object (a can on a tiled floor) match "through" the symmetry and fold the path over.
+SEQUENTIAL_OVERLAP = 5
 CHUNK = 4  # photos per feature-extraction call (a progress step)
 
 
@@ -91,12 +94,13 @@ def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSett
 
 
 def match(database: Path, settings: SfmSettings) -> None:
-    """Match every pair (photos) or each frame with its neighbours in time (video)."""
+    """Match every pair (photos) or each frame with its next few frames (video)."""
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = settings.seed
     if settings.matcher == "sequential":
-        pycolmap.match_sequential(database, device=pycolmap.Device.cpu,
-                                  pairing_options=pycolmap.SequentialPairingOptions(overlap=10),
+        pairing = pycolmap.SequentialPairingOptions(overlap=SEQUENTIAL_OVERLAP,
+                                                    quadratic_overlap=False)
+        pycolmap.match_sequential(database, pairing_options=pairing, device=pycolmap.Device.cpu,
                                   verification_options=verification)
     else:
         pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu,

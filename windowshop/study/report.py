@@ -228,7 +228,7 @@ def report_markdown(grid: Grid, rows: list[ResultRow], info: StudyInfo, files: d
              f"- Budget: {info.budget}",
              f"- Set on every run: {', '.join(f'{k}={v}' for k, v in overrides.items()) or 'nothing'}",
              f"- Scene: `{info.scene}`; PSNR and SSIM are means over "
-             f"{'/'.join(map(str, test_views)) or '—'} held-out views",
+             f"{'/'.join(map(str, test_views)) or '—'} held-out view{'' if test_views == [1] else 's'}",
              f"- Runs finished {_span([r.finished for r in rows if r.finished])}; {len(rows)} of "
              f"{len(grid.combinations)} combinations done; this report written by a call started "
              f"{info.started}",

@@ -38,6 +38,8 @@ class Mp4Writer:
 
     def __init__(self, path: str | Path, width: int, height: int, fps: float, crf: int = 18):
         check_video_size(width, height)
+        if not fps > 0:
+            raise UserError(f"the frame rate must be positive, got --fps {fps}")
         self.path, self.size, self.frames = Path(path), (width, height), 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # quality=None: the rate is set by -crf below (18: visually lossless for smooth renders).

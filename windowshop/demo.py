@@ -71,7 +71,6 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     Returns (and writes to `out_dir/demo.json`) the held-out metrics, the turntable's PSNR
     against the true frames, timings and the files written.
     """
-    from windowshop.fit.checkpoint import load_run
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.render.frames import display_background
@@ -90,13 +89,12 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
                          height=options.video_size)
     outputs = default_outputs(out_dir / "turntable.mp4", poster=True)
     result = render_run(out_dir / "run", video, outputs, device)
-    run = load_run(out_dir / "run", "cpu")
-    cameras = turntable_path(run.train_cameras, video)
+    cameras = turntable_path([v.camera for v in scene.split("train")], video)  # as render_run's
     summary = {
         "model": model_name, "preset": preset, "fit_config": asdict(fit_config),
         "demo_options": asdict(options), "device": str(device),
         "held_out_psnr": metrics.get("psnr"), "held_out_ssim": metrics.get("ssim"),
-        "turntable_psnr": turntable_psnr(outputs.mp4, cameras, display_background(run.background)),
+        "turntable_psnr": turntable_psnr(outputs.mp4, cameras, display_background(scene.background)),
         "train_seconds": metrics.get("train_seconds"), "iterations": metrics.get("iterations"),
         "render_frames_per_second": result.frames_per_second,
         "total_seconds": time.perf_counter() - start,

@@ -168,3 +168,74 @@ void adam_rows(float *param, float *exp_avg, float *exp_avg_sq, i64 C, const i64
         }
     }
 }
+
+/* Render-time marching with early termination, in two passes (count, then fill) that visit the
+ * same samples: each occupied sample's density is interpolated from the one-channel grid
+ * `density` (X, Y, Z) as softplus(raw + shift) * scale (grid units: g = (x - lo) * inv_voxel),
+ * transmittance T is accumulated, and the ray stops once T < threshold, after which no sample can
+ * weigh more. Samples with weight w = T (1 - exp(-sigma step)) >= threshold are emitted. */
+typedef struct {
+    const float *origins, *dirs, *t_min, *t_max;
+    i64 R;
+    float step;
+    const uint8_t *occ;
+    i64 OX, OY, OZ;
+    const float *lo, *inv_cell;
+    const float *density;
+    i64 X, Y, Z;
+    const float *inv_voxel;
+    float shift, scale, threshold;
+} RenderMarch;
+
+static inline float softplus(float x) { return x > 20.0f ? x : log1pf(expf(x)); }
+
+/* March ray r; with t_out == NULL only count the emitted samples. Writes opacity and depth. */
+static i64 render_ray(const RenderMarch *m, i64 r, float *t_out, float *w_out, i64 *ray_out,
+                      float *opacity, float *depth) {
+    const float *o = m->origins + 3 * r, *d = m->dirs + 3 * r;
+    float trans = 1.0f, acc_depth = 0.0f;
+    i64 n = 0;
+    for (i64 k = 0;; k++) {
+        float t = sample_t(m->t_min[r], k, 0.5f, m->step);
+        if (!(t < m->t_max[r]) || trans < m->threshold) break;
+        if (!occupied(o, d, t, m->lo, m->inv_cell, m->occ, m->OX, m->OY, m->OZ)) continue;
+        float g[3];
+        for (int a = 0; a < 3; a++) g[a] = (o[a] + t * d[a] - m->lo[a]) * m->inv_voxel[a];
+        i64 off[8];
+        float w[8], raw = 0.0f;
+        i64 base = corners(g, m->X, m->Y, m->Z, off, w);
+        for (int c = 0; c < 8; c++) raw += w[c] * m->density[base + off[c]];
+        float alpha = 1.0f - expf(-softplus(raw + m->shift) * m->scale * m->step);
+        float weight = trans * alpha;
+        acc_depth += weight * t;
+        if (weight >= m->threshold) {
+            if (t_out) {
+                t_out[n] = t;
+                w_out[n] = weight;
+                ray_out[n] = r;
+            }
+            n++;
+        }
+        trans *= 1.0f - alpha;
+    }
+    *opacity = 1.0f - trans;
+    *depth = acc_depth;
+    return n;
+}
+
+void render_march_count(const RenderMarch *m, i64 *counts) {
+#pragma omp parallel for schedule(dynamic, 64)
+    for (i64 r = 0; r < m->R; r++) {
+        float opacity, depth;
+        counts[r] = render_ray(m, r, NULL, NULL, NULL, &opacity, &depth);
+    }
+}
+
+void render_march_fill(const RenderMarch *m, const i64 *starts, float *t_out, float *w_out,
+                       i64 *ray_out, float *opacity, float *depth) {
+#pragma omp parallel for schedule(dynamic, 64)
+    for (i64 r = 0; r < m->R; r++) {
+        i64 s = starts[r];
+        render_ray(m, r, t_out + s, w_out + s, ray_out + s, opacity + r, depth + r);
+    }
+}

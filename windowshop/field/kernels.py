@@ -37,7 +37,18 @@ _SIGNATURES = {
     "march_count": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P],
     "march_fill": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P, _P, _P],
     "adam_rows": [_P, _P, _P, _I, _P, _I, _P, _F, _F, _F, _F, _F],
+    "render_march_count": [_P, _P],
+    "render_march_fill": [_P, _P, _P, _P, _P, _P, _P],
 }
+
+
+class _RenderMarch(ctypes.Structure):
+    """kernels.c's RenderMarch: the arguments of render_march_count/fill."""
+
+    _fields_ = [("origins", _P), ("dirs", _P), ("t_min", _P), ("t_max", _P), ("R", _I),
+                ("step", _F), ("occ", _P), ("OX", _I), ("OY", _I), ("OZ", _I), ("lo", _P),
+                ("inv_cell", _P), ("density", _P), ("X", _I), ("Y", _I), ("Z", _I),
+                ("inv_voxel", _P), ("shift", _F), ("scale", _F), ("threshold", _F)]
 
 
 def _cpu_id() -> str:
@@ -163,3 +174,36 @@ def adam_rows(param: torch.Tensor, exp_avg: torch.Tensor, exp_avg_sq: torch.Tens
     sqrt_c2 = (1.0 - beta2 ** step) ** 0.5
     library().adam_rows(_ptr(param), _ptr(exp_avg), _ptr(exp_avg_sq), param.shape[1], _ptr(rows),
                         rows.shape[0], _ptr(grad), lr_c, beta1, beta2, eps, sqrt_c2)
+
+
+def render_march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
+                 t_max: torch.Tensor, step: float, occupancy: torch.Tensor, lo: torch.Tensor,
+                 inv_cell: torch.Tensor, density: torch.Tensor, shape: tuple[int, int, int],
+                 inv_voxel: torch.Tensor, shift: float, scale: float, threshold: float
+                 ) -> tuple[torch.Tensor, ...]:
+    """March rays (R, 3) at offsets 0.5 with early termination (see kernels.c render_ray).
+
+    `density` (X*Y*Z,) is the raw one-channel grid of `shape`; points map to its grid units by
+    (x - lo) * inv_voxel. Returns the samples of weight >= threshold as t (K,), weight (K,),
+    ray (K,) int64, counts (R,) int64, and per ray the opacity (R,) and depth (R,) of all samples
+    marched.
+    """
+    lib = library()
+    r = origins.shape[0]
+    grid = occupancy.to(torch.uint8).contiguous()
+    keep = (origins, directions, t_min, t_max, grid, lo, inv_cell, density, inv_voxel)
+    args = _RenderMarch(_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), r, step,
+                        _ptr(grid), *grid.shape, _ptr(lo), _ptr(inv_cell), _ptr(density), *shape,
+                        _ptr(inv_voxel), shift, scale, threshold)
+    counts = torch.empty(r, dtype=torch.int64)
+    lib.render_march_count(ctypes.byref(args), _ptr(counts))
+    ends = torch.cumsum(counts, 0)
+    starts = (ends - counts).contiguous()
+    total = int(ends[-1]) if r else 0
+    t, weight = torch.empty(total), torch.empty(total)
+    ray = torch.empty(total, dtype=torch.int64)
+    opacity, depth = torch.empty(r), torch.empty(r)
+    lib.render_march_fill(ctypes.byref(args), _ptr(starts), _ptr(t), _ptr(weight), _ptr(ray),
+                          _ptr(opacity), _ptr(depth))
+    del keep  # the tensors behind the struct's pointers lived until here
+    return t, weight, ray, counts, opacity, depth

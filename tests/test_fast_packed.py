@@ -3,7 +3,7 @@
 import torch
 
 from windowshop.render.composite import compositing_weights
-from windowshop.render.packed import packed_weights, ray_starts, ray_sum
+from windowshop.render.packed import packed_distortion, packed_weights, ray_starts, ray_sum
 
 
 def test_packed_weights_equal_dense_weights_ray_by_ray():
@@ -44,3 +44,27 @@ def test_ray_sum_and_its_gradient():
     (out * torch.tensor([[1.0, 2.0], [0, 0], [3, 4], [0, 0]])).sum().backward()
     torch.testing.assert_close(values.grad, torch.tensor([[1.0, 2.0]] * 2 + [[3.0, 4.0]] * 3))
     torch.testing.assert_close(ray_sum(torch.ones(5), ray, 3), torch.tensor([2.0, 0.0, 3.0]))
+
+
+def test_distortion_equals_the_quadratic_definition():
+    torch.manual_seed(1)
+    counts = torch.tensor([4, 0, 7])
+    ray = torch.repeat_interleave(torch.arange(3), counts)
+    t = torch.cat([torch.rand(4).sort().values, torch.rand(7).sort().values]) * 3
+    weights = torch.rand(11) / 4
+    out = packed_distortion(weights, t, 0.05, ray, counts)
+    for r, (start, n) in enumerate(zip(ray_starts(counts).tolist(), counts.tolist())):
+        w, s = weights[start:start + n], t[start:start + n]
+        expected = (w[:, None] * w[None, :] * (s[:, None] - s[None, :]).abs()).sum() + (w * w).sum() * 0.05 / 3
+        torch.testing.assert_close(out[r], expected)
+
+
+def test_distortion_prefers_a_surface_to_fog():
+    counts = torch.tensor([10, 10])
+    ray = torch.repeat_interleave(torch.arange(2), counts)
+    t = torch.linspace(2.0, 3.0, 10).repeat(2)
+    surface = torch.zeros(10)
+    surface[4] = 0.9
+    weights = torch.cat([surface, torch.full((10,), 0.09)])
+    loss = packed_distortion(weights, t, 0.1, ray, counts)
+    assert loss[0] < 0.2 * loss[1]

@@ -37,8 +37,9 @@ def toy_scene(size=12, background="white", alpha=False) -> Scene:
     views = []
     for i, angle in enumerate(np.linspace(0, 2 * np.pi, 5, endpoint=False)):
         eye = (3 * np.cos(angle), 3 * np.sin(angle), 1.0)
-        camera = Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
-                        c2w=look_at(eye))
+        # numpy scalars, as readers produce them: the checkpoint must still load weights-only
+        camera = Camera(fx=np.float64(size), fy=np.float32(size), cx=size / 2, cy=size / 2,
+                        width=np.int64(size), height=size, c2w=look_at(eye))
         image = np.full((size, size, 3), (0.8, 0.4, 0.2), dtype=np.float32)
         mask = np.ones((size, size), dtype=np.float32) * 0.5 if alpha else None
         views.append(View(camera, image, "test" if i == 4 else "train", f"view_{i}.png", mask))

@@ -126,6 +126,15 @@ def cmd_study(args: argparse.Namespace) -> None:
     from windowshop.device import pick_device
     from windowshop.study.command import study_command
 
+    if args.broker is not None:
+        from windowshop.distributed.study import distributed_study
+
+        if args.device is not None:
+            raise UserError("--device: with --broker each worker picks its own (windowshop worker "
+                            "--device)")
+        distributed_study(args.broker, args.preset, args.grid, args.scene, args.out, args.iters,
+                          args.seconds, args.set)
+        return
     study_command(args.preset, args.grid, args.scene, args.out, args.iters, args.seconds, args.set,
                   pick_device(args.device), show_progress=not args.quiet)
 
@@ -267,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a fit switch for every run, e.g. batch_rays=1024 or test_views=2 (repeat)")
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA when present)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--broker", default=None, metavar="URL", help="run the combinations on the "
+                   "workers of this Redis broker (redis://HOST:6379/0, docs/scaling.md)")
     p.set_defaults(func=cmd_study)
 
     p = sub.add_parser("prepare", help="photos (folder or zip) or a video -> a posed scene folder")

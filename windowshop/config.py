@@ -76,6 +76,8 @@ class FastConfig:
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
     weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
+    render_threshold: float = 1e-3  # ... when rendering, where rays also stop at this transmittance
+    distortion: float = 0.0  # weight of mip-NeRF 360's distortion loss (concentrates each ray's weight)
     tv_density: float = 0.0  # total-variation weight on the density grid at the samples
     tv_features: float = 0.0  # ... and on the feature grid
 

@@ -6,5 +6,6 @@
 The single-machine service (windowshop.service) is unchanged; this package puts a shared SQL job
 store (store.py), the Celery application (celery_app.py), the worker's tasks (tasks.py) and the
 service's side of it (service.py: dispatch, and the worker-facing routes inputs and results travel
-through) beside it. See docs/scaling.md.
+through) beside it, and `windowshop study --broker` (study.py: a study's runs as
+tasks, gathered by the command). See docs/scaling.md.
 """

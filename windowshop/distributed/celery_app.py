@@ -15,7 +15,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 QUEUES = ("cpu", "gpu")
 
-app = Celery("windowshop", include=["windowshop.distributed.tasks"])
+app = Celery("windowshop", include=["windowshop.distributed.tasks", "windowshop.distributed.study"])
 
 
 class ClusterSettings(BaseSettings):
@@ -49,6 +49,7 @@ def configure(settings: ClusterSettings) -> Celery:
         worker_prefetch_multiplier=1,
         task_default_queue="cpu",
         task_ignore_result=True,  # results travel through the service, not a result backend
+        result_backend=settings.broker,  # ... except a study run's (distributed/study.py)
         task_serializer="json",
         accept_content=["json"],
         worker_hijack_root_logger=False,

@@ -20,10 +20,11 @@ from torch import nn
 
 from windowshop.config import FAST_PRESETS, FastConfig
 from windowshop.field.grid import DenseGrid
-from windowshop.field.occupancy import OccupancyGrid
+from windowshop.field import kernels
+from windowshop.field.occupancy import OccupancyGrid, ray_box
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
-from windowshop.render.packed import packed_weights, ray_sum
+from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
 
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
@@ -130,23 +131,60 @@ class FastModel(RadianceModel):
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
                     background: torch.Tensor) -> RenderOutput:
         n_rays = origins.shape[0]
+        aux = {}
+        if self.training or not kernels.available(origins.device):
+            t, weights, ray, opacity, depth, count = self._march_and_weigh(origins, directions, aux)
+        else:
+            t, weights, ray, opacity, depth, count = self._march_and_weigh_fused(origins, directions)
+        # colour only where it shows: after termination or in near-empty space it cannot matter
+        threshold = self.config.weight_threshold if self.training else self.config.render_threshold
+        keep = (weights.detach() >= threshold).nonzero()[:, 0]
+        kept_ray = ray.index_select(0, keep)
+        points = origins.index_select(0, kept_ray) + t.index_select(0, keep)[:, None] * \
+            directions.index_select(0, kept_ray)
+        rgb = self.color(points, directions.index_select(0, kept_ray))
+        color = ray_sum(weights.index_select(0, keep)[:, None] * rgb, kept_ray, n_rays)
+        color = color + (1.0 - opacity)[:, None] * background
+        return RenderOutput(rgb=color, depth=depth, opacity=opacity, aux=aux, num_samples=count)
+
+    def _march_and_weigh(self, origins: torch.Tensor, directions: torch.Tensor, aux: dict):
+        """Every occupied sample (jittered when training) and its compositing weight.
+
+        Returns t (S,), weights (S,), ray (S,), opacity (R,), depth (R,) and S; when training
+        with a distortion weight, puts each ray's distortion (R,) into `aux`.
+        """
         step = self.step_length
         samples = self.occupancy.march(origins, directions, self.bounds.near, self.bounds.far,
                                        step, jitter=self.training)
         ray, t = samples.ray, samples.t
         points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
         weights = packed_weights(self.sigma(points), step, ray, samples.counts)
-        opacity = ray_sum(weights, ray, n_rays)
-        depth = ray_sum(weights * t, ray, n_rays)
-        # colour only where it shows: after termination or in near-empty space it cannot matter
-        keep = (weights.detach() > self.config.weight_threshold).nonzero()[:, 0]
-        kept_ray = ray.index_select(0, keep)
-        rgb = self.color(points.index_select(0, keep), directions.index_select(0, kept_ray))
-        color = ray_sum(weights.index_select(0, keep)[:, None] * rgb, kept_ray, n_rays)
-        color = color + (1.0 - opacity)[:, None] * background
-        return RenderOutput(rgb=color, depth=depth, opacity=opacity, num_samples=len(samples))
+        if self.training and self.config.distortion > 0:
+            aux["distortion"] = packed_distortion(weights, t, step, ray, samples.counts)
+        n_rays = origins.shape[0]
+        return (t, weights, ray, ray_sum(weights, ray, n_rays), ray_sum(weights * t, ray, n_rays),
+                len(samples))
+
+    @torch.no_grad()
+    def _march_and_weigh_fused(self, origins: torch.Tensor, directions: torch.Tensor):
+        """As `_march_and_weigh` without jitter, in one kernel that stops each ray once its
+        transmittance is below `render_threshold` and returns only the samples above it."""
+        occupancy, density = self.occupancy, self.density
+        t_min, t_max = ray_box(origins, directions, occupancy.aabb, self.bounds.near, self.bounds.far)
+        t, weights, ray, counts, opacity, depth = kernels.render_march(
+            origins.contiguous(), directions.contiguous(), t_min, t_max, self.step_length,
+            occupancy.occupied, occupancy.aabb[0].contiguous(), occupancy.inv_cell.contiguous(),
+            density.values.detach().view(-1), density.shape, (1.0 / density.voxel).contiguous(),
+            self.shift, self.density_scale, self.config.render_threshold)
+        return t, weights, ray, opacity, depth, len(t)
 
     # --- training -------------------------------------------------------------------------------
+    def loss(self, out: RenderOutput, target: torch.Tensor) -> torch.Tensor:
+        loss = torch.mean((out.rgb - target) ** 2)
+        if "distortion" in out.aux:
+            loss = loss + self.config.distortion * out.aux["distortion"].mean()
+        return loss
+
     def make_optimizer(self) -> torch.optim.Optimizer:
         cfg = self.config
         return GridAdam([

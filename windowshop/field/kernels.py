@@ -191,7 +191,6 @@ def render_march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.T
     lib = library()
     r = origins.shape[0]
     grid = occupancy.to(torch.uint8).contiguous()
-    keep = (origins, directions, t_min, t_max, grid, lo, inv_cell, density, inv_voxel)
     args = _RenderMarch(_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), r, step,
                         _ptr(grid), *grid.shape, _ptr(lo), _ptr(inv_cell), _ptr(density), *shape,
                         _ptr(inv_voxel), shift, scale, threshold)
@@ -205,5 +204,4 @@ def render_march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.T
     opacity, depth = torch.empty(r), torch.empty(r)
     lib.render_march_fill(ctypes.byref(args), _ptr(starts), _ptr(t), _ptr(weight), _ptr(ray),
                           _ptr(opacity), _ptr(depth))
-    del keep  # the tensors behind the struct's pointers lived until here
     return t, weight, ray, counts, opacity, depth

@@ -49,8 +49,9 @@ class LoadedRun:
 
 
 def camera_to_dict(camera: Camera) -> dict:
-    return {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
-            "width": camera.width, "height": camera.height,
+    """Plain Python numbers only (readers may hand numpy scalars, which weights_only refuses)."""
+    return {"fx": float(camera.fx), "fy": float(camera.fy), "cx": float(camera.cx),
+            "cy": float(camera.cy), "width": int(camera.width), "height": int(camera.height),
             "c2w": np.asarray(camera.c2w, dtype=float).tolist()}
 
 

@@ -186,12 +186,12 @@ def drop_blurred(photos: list[Photo], dropped: Dropped, ratio: float = BLUR_RATI
     """Photos at least `ratio` times as sharp as the set's median; the others are dropped, named."""
     if len(photos) <= MIN_PHOTOS:
         return photos
-    limit = ratio * float(np.median([p.sharpness for p in photos]))
+    median = float(np.median([p.sharpness for p in photos]))
     kept = []
     for photo in photos:
-        if photo.sharpness < limit:
+        if photo.sharpness < ratio * median:
             dropped.reasons[photo.source.name] = (
-                f"too blurred (sharpness {photo.sharpness / limit * ratio:.2f} of the median)")
+                f"too blurred (sharpness {photo.sharpness / median:.2f} of the median)")
         else:
             kept.append(photo)
     return kept

@@ -25,15 +25,8 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos import objectbox, output, report
 from windowshop.photos.frames import sample_frames
-from windowshop.photos.ingest import (
-    VIDEO_SUFFIXES,
-    Dropped,
-    Inputs,
-    Photo,
-    check_enough,
-    gather_inputs,
-    read_photos,
-)
+from windowshop.photos.ingest import (VIDEO_SUFFIXES, Dropped, Inputs, Photo, check_enough,
+                                      gather_inputs, read_photos)
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
@@ -93,8 +86,8 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
         check_enough(photos, dropped, what="video frames")
         return photos, dropped
     if not inputs.files:
-        raise UserError("no photos found (looked for " + ", ".join(sorted(
-            {".jpg", ".png", ".webp", ".heic"})) + "); give a folder or zip of photos, or a video")
+        raise UserError("no photos found (JPEG, PNG, WebP or HEIC files); give a folder or zip "
+                        "of photos, or a video")
     with stages.stage("reading photos", len(inputs.files)) as advance:
         return read_photos(inputs.files, options.max_side, dropped, advance), dropped
 
@@ -109,7 +102,7 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> S
     single = len({(p.camera_key, p.pixels.shape) for p in photos}) == 1
     intrinsics = None
     if options.intrinsics is not None:
-        if len({p.pixels.shape for p in photos}) != 1:
+        if len({(p.pixels.shape, round(p.scale, 6)) for p in photos}) != 1:
             raise UserError("--intrinsics applies to photos of one size, but these differ in size")
         intrinsics = tuple(float(v) * photos[0].scale for v in options.intrinsics)
         single = True

@@ -16,6 +16,20 @@ def ray_starts(counts: torch.Tensor) -> torch.Tensor:
     return torch.cumsum(counts, dim=0) - counts
 
 
+def _exclusive_segment_cumsum(values: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
+    """Per-ray sums (S,) of `values` (S,) over the earlier samples of the same ray, in float64.
+
+    A global cumulative sum minus its value at the ray's first sample (a ray without samples has
+    its start past the end: clamped, and repeated zero times).
+    """
+    total = torch.cumsum(values.double(), dim=0)
+    before = total - values.double()
+    if before.numel():
+        first = before[ray_starts(counts).clamp(max=before.numel() - 1)]
+        before = before - first.repeat_interleave(counts, output_size=before.numel())
+    return before
+
+
 def packed_weights(sigma: torch.Tensor, dt: torch.Tensor | float, ray: torch.Tensor,
                    counts: torch.Tensor) -> torch.Tensor:
     """Compositing weights (S,) of densities `sigma` (S,) over intervals `dt` (S,) or a scalar.
@@ -24,11 +38,7 @@ def packed_weights(sigma: torch.Tensor, dt: torch.Tensor | float, ray: torch.Ten
     ray's first sample, taken in float64 so long batches do not lose precision.
     """
     optical = sigma * dt
-    total = torch.cumsum(optical.double(), dim=0)
-    before = total - optical.double()  # exclusive global sum
-    if before.numel():  # (a ray without samples has its start past the end: clamp, repeated 0 times)
-        first = before[ray_starts(counts).clamp(max=before.numel() - 1)]
-        before = before - first.repeat_interleave(counts, output_size=before.numel())
+    before = _exclusive_segment_cumsum(optical, counts)
     return torch.exp(-before).to(sigma.dtype) * (1.0 - torch.exp(-optical))
 
 
@@ -39,3 +49,18 @@ def ray_sum(values: torch.Tensor, ray: torch.Tensor, n_rays: int) -> torch.Tenso
         return out.index_add(0, ray, values)
     flat = (ray[:, None] * values.shape[1] + torch.arange(values.shape[1], device=ray.device))
     return out.view(-1).index_add(0, flat.reshape(-1), values.reshape(-1)).view_as(out)
+
+
+def packed_distortion(weights: torch.Tensor, t: torch.Tensor, dt: torch.Tensor | float,
+                      ray: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
+    """Mip-NeRF 360's distortion loss per ray (R,), in linear time over samples sorted by `t`.
+
+    sum_ij w_i w_j |t_i - t_j| + 1/3 sum_i w_i^2 dt_i: small when each ray's weight sits in one
+    short interval (a surface), large for weight smeared along the ray (fog, floaters).
+    """
+    w = weights.double()
+    wt = w * t.double()
+    pairs = 2.0 * w * (t.double() * _exclusive_segment_cumsum(w, counts)
+                       - _exclusive_segment_cumsum(wt, counts))
+    own = w * w * dt / 3.0
+    return ray_sum((pairs + own).to(weights.dtype), ray, counts.shape[0])

@@ -10,8 +10,14 @@ import pytest
 from PIL import Image
 
 from windowshop.errors import UserError
-from windowshop.video.encode import (Mp4Writer, TurntableWriter, VideoOutputs, depth_colormap,
-                                     probe_video, to_uint8)
+from windowshop.video.encode import (
+    Mp4Writer,
+    TurntableWriter,
+    VideoOutputs,
+    depth_colormap,
+    probe_video,
+    to_uint8,
+)
 
 
 def moving_bar(k: int, width: int, height: int) -> np.ndarray:

@@ -13,8 +13,13 @@ from windowshop.config import VideoOptions
 from windowshop.errors import UserError
 from windowshop.rays import project
 from windowshop.scene.types import Camera
-from windowshop.video.paths import (fit_orbit, read_camera_path, spiral_elevations, turntable_path,
-                                    write_camera_path)
+from windowshop.video.paths import (
+    fit_orbit,
+    read_camera_path,
+    spiral_elevations,
+    turntable_path,
+    write_camera_path,
+)
 
 LEGO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lego"
 

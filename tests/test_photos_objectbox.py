@@ -88,6 +88,17 @@ def test_foreground_mask_stays_in_the_region():
     assert not mask[:, 82:].any() and mask[:, :78].sum() > 0.9 * truth[:, :78].sum()
 
 
+def test_hull_mask_outlines_the_keypoints():
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    points = np.column_stack([100 + 30 * np.cos(angles), 60 + 30 * np.sin(angles)])
+    mask = objectbox.hull_mask(points, 200, 120, grow=0.0)
+    assert mask.shape == (120, 200)
+    assert mask.sum() == pytest.approx(np.pi * 30**2, rel=0.03)
+    assert mask[60, 100] and not mask[60, 135] and not mask[10, 100]
+    grown = objectbox.hull_mask(points, 200, 120, grow=0.02)  # 2% of the diagonal: 4.7 px
+    assert grown[60, 133] and grown.sum() > mask.sum()
+
+
 def test_a_busy_background_gets_no_masks():
     kermit = [np.asarray(Image.open(p)) for p in sorted(KERMIT.glob("*.jpg"))[:3]]
     assert objectbox.plain_colour(kermit[0]) is None

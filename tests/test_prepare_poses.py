@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pycolmap
 import pytest
 from PIL import Image
 
@@ -63,8 +64,25 @@ def test_beer_can_20_photos_agree_with_its_colmap_model(beer):
     assert errors.centre_share.max() < MAX_CENTRE_SHARE, by_name
 
 
-def test_beer_can_has_no_masks_on_its_tiled_floor(beer):
-    assert not beer.report["masks"] and not (beer.out_dir / "masks").exists()
+def test_beer_can_masks_outline_its_features(beer):
+    """The tiled floor is no plain background: each mask is the hull of the object's keypoints in
+    that photo, so most of the object's sparse points (seen there or not) project into it, and
+    it is much smaller than the photo."""
+    assert beer.report["masks"] == "hull" and beer.report["background"] == "alpha"
+    meta = json.loads((beer.out_dir / "transforms.json").read_text())["windowshop"]
+    transform, aabb = np.array(meta["transform"]), np.array(meta["aabb"])
+    model = pycolmap.Reconstruction(beer.out_dir / "colmap")
+    points = np.array([p.xyz for p in model.points3D.values()])
+    points = points @ transform[:3, :3].T + transform[:3, 3]
+    points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
+    inside = []
+    for frame in read_source(beer.out_dir).frames:
+        mask = np.asarray(Image.open(frame.mask_path)) > 127
+        uv = np.clip(project(points, frame.camera)[0].astype(int), 0, [mask.shape[1] - 1,
+                                                                       mask.shape[0] - 1])
+        inside.append(mask[uv[:, 1], uv[:, 0]].mean())
+        assert 0.01 < mask.mean() < 0.3
+    assert np.median(inside) > 0.9 and min(inside) > 0.5, inside
 
 
 def _temple_intrinsics() -> tuple[float, float, float, float]:
@@ -103,7 +121,7 @@ def test_temple_intrinsics_are_kept(temple):
 def test_temple_masks_lie_on_the_temple(temple):
     """The masks (black background) fall inside the temple's published bounding box as each
     calibrated camera sees it, and cover a good part of it."""
-    assert temple.report["masks"] and temple.report["background"] == "black"
+    assert temple.report["masks"] == "colour" and temple.report["background"] == "alpha"
     lo = np.array([-0.073568, 0.021728, -0.012445])
     hi = np.array([0.028855, 0.181892, 0.062736])
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])

@@ -12,9 +12,8 @@ from PIL import Image
 
 from windowshop.cli import main
 from windowshop.config import FitConfig, VideoOptions
-from windowshop.demo import demo_scene
 from windowshop.model import Bounds, RadianceModel, RenderOutput, model_config
-from windowshop.scene.synthetic import orbit_cameras
+from windowshop.scene.synthetic import orbit_cameras, synthetic_scene
 from windowshop.scene.types import Camera
 from windowshop.video.encode import VideoOutputs, read_video
 from windowshop.video.paths import read_camera_path, turntable_path, write_camera_path
@@ -94,7 +93,7 @@ def run_dir(tmp_path_factory) -> Path:
     from windowshop.fit.trainer import fit
 
     out = tmp_path_factory.mktemp("run")
-    scene = demo_scene(views=8, test_views=1, image_size=16)
+    scene = synthetic_scene(n_train=8, n_test=1, size=16)
     config = model_config("nerf", "tiny", width=32, depth=2, n_coarse=16)
     fit(scene, "nerf", config, FitConfig(iters=5, batch_rays=64), out, "cpu", show_progress=False)
     return out

@@ -65,6 +65,7 @@ class FastConfig:
     growth: tuple[float, ...] = (0.1, 0.2, 0.3)  # progress at which the grid grows (geometrically)
     features: int = 16  # channels of the feature grid (16 floats: one cache line per vertex)
     hidden: int = 64  # width of the colour MLP's one hidden layer
+    deferred: bool = True  # decode each ray's composited features once, not every sample's
     mlp_bf16: bool = True  # run the MLP in bfloat16 where the hardware has it (CPU: AVX512-BF16)
     sh_degree: int = 2  # spherical harmonics of the view direction fed to it (-1: no view dependence)
     step: float = 0.5  # marching step, in voxels of the current grid
@@ -95,7 +96,7 @@ class PrepareOptions:
     frames: int = 40  # frames sampled from a video
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
     matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
-    masks: bool = True  # foreground masks when the background is plain
+    masks: bool = True  # foreground masks (by colour on a plain background, else feature hulls)
     overwrite: bool = False  # replace an earlier prepare's output folder
     seed: int = 0
     verbose: bool = False  # pycolmap's own logging
@@ -126,6 +127,6 @@ class VideoOptions:
     radius: float | None = None  # None: the median distance of the training cameras from the centre
     elevation: float | None = None  # degrees above the orbit plane; None: the training views' median
     start_angle: float = 0.0  # degrees of azimuth past the first training camera
-    fov: float | None = None  # vertical field of view in degrees; None: the training cameras' median
+    fov: float | None = None  # vertical, degrees; None: the training cameras' median, on the narrower side
     spiral_amplitude: float = 15.0  # degrees the spiral swings above and below its elevation
     chunk: int = 8192  # rays rendered at once (bounds memory at any resolution)

@@ -9,15 +9,14 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from windowshop.config import FitConfig, VideoOptions
-from windowshop.scene.types import Camera, Scene
-
+from windowshop.scene.types import Camera
 
 # Training budget unless --iters or --seconds says otherwise: time, not steps, so the demo takes
 # about two and a half minutes on any CPU however fast the model's steps are there.
@@ -34,22 +33,6 @@ class DemoOptions:
     frames: int = 60  # turntable frames
     video_size: int = 128  # pixels a side of the turntable
     fps: float = 30.0
-
-
-def demo_scene(views: int, test_views: int, image_size: int) -> Scene:
-    """The built-in object's views, with every camera number a plain Python float.
-
-    (Checkpoints load with `torch.load(weights_only=True)`, which refuses the numpy scalars the
-    synthetic cameras carry; plain floats keep the run loadable.)
-    """
-    from windowshop.scene.synthetic import synthetic_scene
-
-    scene = synthetic_scene(n_train=views, n_test=test_views, size=image_size)
-    for view in scene.views:
-        cam = view.camera
-        view.camera = replace(cam, fx=float(cam.fx), fy=float(cam.fy), cx=float(cam.cx),
-                              cy=float(cam.cy), width=int(cam.width), height=int(cam.height))
-    return scene
 
 
 def turntable_psnr(video: Path, cameras: list[Camera], background: tuple[float, float, float]) -> float:
@@ -74,6 +57,7 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.render.frames import display_background
+    from windowshop.scene.synthetic import synthetic_scene
     from windowshop.video.encode import check_video_size
     from windowshop.video.paths import turntable_path
     from windowshop.video.turntable import default_outputs, render_run
@@ -82,7 +66,7 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    scene = demo_scene(options.views, options.test_views, options.image_size)
+    scene = synthetic_scene(n_train=options.views, n_test=options.test_views, size=options.image_size)
     metrics = fit(scene, model_name, model_config(model_name, preset), fit_config, out_dir / "run",
                   device)
     video = VideoOptions(frames=options.frames, fps=options.fps, width=options.video_size,

@@ -113,7 +113,10 @@ class FastModel(RadianceModel):
 
     def color(self, points: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
         """Colour (N, 3) in [0, 1] at points (N, 3) seen along unit directions (N, 3)."""
-        h = self.features(points)
+        return self.decode(self.features(points), directions)
+
+    def decode(self, h: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """Colour (N, 3) in [0, 1] of features (N, C) seen along unit directions (N, 3)."""
         if self.config.sh_degree >= 0:
             h = torch.cat([h, spherical_harmonics(directions, self.config.sh_degree)], dim=-1)
         with torch.autocast(h.device.type, dtype=torch.bfloat16, enabled=self._bf16(h.device)):
@@ -142,8 +145,14 @@ class FastModel(RadianceModel):
         kept_ray = ray.index_select(0, keep)
         points = origins.index_select(0, kept_ray) + t.index_select(0, keep)[:, None] * \
             directions.index_select(0, kept_ray)
-        rgb = self.color(points, directions.index_select(0, kept_ray))
-        color = ray_sum(weights.index_select(0, keep)[:, None] * rgb, kept_ray, n_rays)
+        kept_weights = weights.index_select(0, keep)[:, None]
+        if self.config.deferred:
+            features = ray_sum(kept_weights * self.features(points), kept_ray, n_rays)
+            mean = features / opacity.detach().clamp(min=threshold)[:, None]
+            color = opacity[:, None] * self.decode(mean, directions)
+        else:
+            rgb = self.color(points, directions.index_select(0, kept_ray))
+            color = ray_sum(kept_weights * rgb, kept_ray, n_rays)
         color = color + (1.0 - opacity)[:, None] * background
         return RenderOutput(rgb=color, depth=depth, opacity=opacity, aux=aux, num_samples=count)
 

@@ -9,8 +9,9 @@ point the cameras look at, are the object's (and the surface it stands on, right
 from __future__ import annotations
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageDraw
 from scipy import ndimage
+from scipy.spatial import ConvexHull
 
 from windowshop.rays import project
 from windowshop.scene import normalize
@@ -26,6 +27,8 @@ PLAIN_SPREAD = 40  # border pixels within this (0-255, max over channels) of its
 PLAIN_SHARE = 0.9  # ... for at least this share of the band: a plain background
 PLAIN_VIEWS = 0.8  # masks are made when at least this share of the views has one
 HOLE_SHARE = 0.002  # holes in the mask smaller than this share of the image are filled
+HULL_POINTS = 20  # fewer object keypoints than this in some photo: no hull masks for the capture
+HULL_GROW = 0.02  # hull masks grow by this share of the image diagonal (features sit inside edges)
 FOREGROUND = 60  # pixels further than this from the background colour are the object's
 
 
@@ -121,6 +124,20 @@ def background_colour(images: list[np.ndarray]) -> np.ndarray | None:
     if len(colours) < PLAIN_VIEWS * len(images):
         return None
     return np.median(np.stack(colours), axis=0)
+
+
+def hull_mask(points: np.ndarray, width: int, height: int, grow: float = HULL_GROW) -> np.ndarray:
+    """(H, W) bool: the convex hull of the object's keypoints `points` (K, 2) in one photo, grown
+    by `grow` of the image diagonal. For a busy background, where colour cannot tell the object
+    apart, this is the silhouette the object's own features outline (convex objects: tightly)."""
+    hull = points[ConvexHull(points).vertices]
+    centre = hull.mean(0)
+    offset = hull - centre
+    hull = centre + offset * (1 + grow * np.hypot(width, height) / np.linalg.norm(offset, axis=1,
+                                                                                   keepdims=True))
+    image = Image.new("L", (width, height), 0)
+    ImageDraw.Draw(image).polygon([tuple(v) for v in hull], fill=255)
+    return np.asarray(image) > 0
 
 
 def mask_image(mask: np.ndarray) -> Image.Image:

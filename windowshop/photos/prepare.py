@@ -56,6 +56,7 @@ class Located:
     aabb: np.ndarray  # (2, 3) normalised
     points: np.ndarray  # (Q, 3) the object's sparse points, normalised
     masks: dict[str, np.ndarray]  # photo name -> (H, W) bool; empty when none are made
+    mask_kind: str  # "colour" (plain background), "hull" (object keypoints) or "none"
     background: str
 
 
@@ -136,6 +137,38 @@ def _shown(photo: Photo) -> str:
     return photo.name if photo.source.suffix.lower() in VIDEO_SUFFIXES else photo.source.name
 
 
+def _object_keypoints(sfm: SfmResult, photo: output.PosedPhoto, transform: np.ndarray,
+                      aabb: np.ndarray) -> np.ndarray:
+    """(K, 2) pixels of `photo` whose sparse point lies in the object box (normalised frame)."""
+    image = sfm.reconstruction.find_image_with_name(photo.image_name)
+    seen = [p for p in image.points2D if p.has_point3D()]
+    if not seen:
+        return np.zeros((0, 2))
+    xyz = np.array([sfm.reconstruction.points3D[p.point3D_id].xyz for p in seen])
+    xyz = xyz @ transform[:3, :3].T + transform[:3, 3]
+    inside = np.all((xyz >= aabb[0]) & (xyz <= aabb[1]), axis=1)
+    return np.array([p.xy for p in seen])[inside].reshape(-1, 2)
+
+
+def find_masks(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str, np.ndarray],
+               transform: np.ndarray, aabb: np.ndarray) -> tuple[dict[str, np.ndarray], str]:
+    """(photo name -> (H, W) bool mask, how they were made: "colour", "hull" or "none").
+
+    A plain background gives colour masks; otherwise, when every photo has enough of the
+    object's keypoints, their convex hulls; otherwise none.
+    """
+    colour = objectbox.background_colour([pixels[p.image_name] for p in photos])
+    if colour is not None:
+        return {p.name: objectbox.foreground_mask(
+            pixels[p.image_name], colour,
+            objectbox.box_region(aabb[0], aabb[1], p.camera, np.eye(4))) for p in photos}, "colour"
+    keypoints = {p.name: _object_keypoints(sfm, p, transform, aabb) for p in photos}
+    if min(len(k) for k in keypoints.values()) < objectbox.HULL_POINTS:
+        return {}, "none"
+    return {p.name: objectbox.hull_mask(keypoints[p.name], p.camera.width, p.camera.height)
+            for p in photos}, "hull"
+
+
 def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Located:
     """Object box, normalisation and masks for a reconstruction; `pixels` by image file name."""
     posed = output.posed_photos(sfm.reconstruction)
@@ -146,15 +179,11 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Locate
     lo, hi = objectbox.object_box(chosen, cameras, rotation)
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
-    colour = objectbox.background_colour([pixels[p.image_name] for p in posed]) if masks else None
-    found: dict[str, np.ndarray] = {}
-    if colour is not None:
-        for p in posed:
-            region = objectbox.box_region(aabb[0], aabb[1], p.camera, np.eye(4))
-            found[p.name] = objectbox.foreground_mask(pixels[p.image_name], colour, region)
+    found, kind = find_masks(sfm, posed, pixels, transform, aabb) if masks else ({}, "none")
+    # with masks the model learns the object alone, over random backgrounds (Scene "alpha")
     return Located(photos=posed, transform=transform, aabb=aabb,
                    points=chosen @ transform[:3, :3].T + transform[:3, 3], masks=found,
-                   background="white" if colour is None or colour.mean() >= 128 else "black")
+                   mask_kind=kind, background="alpha" if found else "white")
 
 
 def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,
@@ -188,7 +217,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
-        "attempts": [vars(a) for a in sfm.attempts], "masks": bool(found.masks),
+        "attempts": [vars(a) for a in sfm.attempts], "masks": found.mask_kind,
         "background": found.background, "aabb": found.aabb.tolist(),
         "views": [{"name": p.name, "photo": str(by_name[p.name].source)} for p in found.photos],
         "seconds": {k: round(v, 3) for k, v in stages.seconds.items()},

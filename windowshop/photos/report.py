@@ -26,8 +26,9 @@ def summary_lines(report: dict) -> list[str]:
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
     if report["unplaced"]:
         lines.append(f"  could not place: {', '.join(report['unplaced'])}")
-    if report["masks"]:
-        lines.append(f"  foreground masks made ({report['background']} background)")
+    if report["masks"] != "none":
+        how = {"colour": "the plain background", "hull": "the outline of the object's features"}
+        lines.append(f"  foreground masks made from {how[report['masks']]}")
     return lines
 
 

@@ -167,7 +167,8 @@ class TurntableWriter:
         if self.outputs.poster is not None and self.frames == self.outputs.poster_frame:
             save_image(frame, self.outputs.poster)
         if self.outputs.frames_dir is not None:
-            save_image(frame, Path(self.outputs.frames_dir) / f"frame_{self.frames:04d}.{self.outputs.frames_format}")
+            name = f"frame_{self.frames:04d}.{self.outputs.frames_format}"
+            save_image(frame, Path(self.outputs.frames_dir) / name)
         self.frames += 1
 
     def close(self) -> None:
@@ -183,7 +184,7 @@ class TurntableWriter:
 
 
 def read_video(path: str | Path) -> tuple[dict, Iterator[np.ndarray]]:
-    """Decode a video with ffmpeg: its metadata ("size", "fps", "codec", ...) and its (H, W, 3) uint8 frames."""
+    """Decode a video with ffmpeg: its metadata ("size", "fps", "codec", ...), its (H, W, 3) uint8 frames."""
     reader = imageio_ffmpeg.read_frames(str(path))
     meta = next(reader)
     width, height = meta["size"]

@@ -35,7 +35,7 @@ def cmd_inspect(args: argparse.Namespace) -> None:
     inspect_command(args.path, _scene_options(args), as_json=args.json, plot=args.plot)
 
 
-DEFAULT_MODEL = "nerf"  # the model `fit` trains unless --model says otherwise
+DEFAULT_MODEL = "fast"  # the model `fit`, `demo` and `video` train unless --model says otherwise
 
 
 def _add_fit_flags(p: argparse.ArgumentParser) -> None:
@@ -290,7 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="known camera intrinsics in pixels of the photos (kept fixed)")
     p.add_argument("--matcher", choices=["auto", "exhaustive", "sequential"], default="auto",
                    help="feature matching (auto: sequential for a video, else exhaustive)")
-    p.add_argument("--no-masks", action="store_true", help="no foreground masks, even on a plain background")
+    p.add_argument("--no-masks", action="store_true",
+                   help="no foreground masks (the model then learns the whole photos)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier prepare in --out")
     p.set_defaults(func=cmd_prepare)
 

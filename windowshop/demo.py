@@ -57,7 +57,10 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.render.frames import display_background
+    from windowshop.config import SceneOptions
+    from windowshop.scene import load_scene
     from windowshop.scene.synthetic import synthetic_scene
+    from windowshop.scene.writer import write_transforms
     from windowshop.video.encode import check_video_size
     from windowshop.video.paths import turntable_path
     from windowshop.video.turntable import default_outputs, render_run
@@ -66,9 +69,13 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    scene = synthetic_scene(n_train=options.views, n_test=options.test_views, size=options.image_size)
+    # Written to disk first, so the run records a scene that `windowshop eval` can load again.
+    synthetic = synthetic_scene(n_train=options.views, n_test=options.test_views,
+                                size=options.image_size)
+    scene_options = SceneOptions(background=synthetic.background)
+    scene = load_scene(write_transforms(synthetic, out_dir / "scene"), scene_options)
     metrics = fit(scene, model_name, model_config(model_name, preset), fit_config, out_dir / "run",
-                  device)
+                  device, scene_options=scene_options)
     video = VideoOptions(frames=options.frames, fps=options.fps, width=options.video_size,
                          height=options.video_size)
     outputs = default_outputs(out_dir / "turntable.mp4", poster=True)

@@ -78,13 +78,12 @@ def plain_colour(pixels: np.ndarray) -> np.ndarray | None:
     return colour if np.mean(spread <= PLAIN_SPREAD) >= PLAIN_SHARE else None
 
 
-def box_region(lo: np.ndarray, hi: np.ndarray, camera: Camera, to_world: np.ndarray,
-               margin: float = 0.05) -> np.ndarray:
-    """(H, W) bool: the image rectangle around the box [lo, hi] (given in the frame that
-    `to_world` (4, 4) takes to the camera's world), grown by `margin` of the image size."""
+def box_region(aabb: np.ndarray, camera: Camera, margin: float = 0.05) -> np.ndarray:
+    """(H, W) bool: the image rectangle around the box `aabb` (2, 3) (in the camera's world),
+    grown by `margin` of the image size."""
+    lo, hi = aabb
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                         for z in (lo[2], hi[2])])
-    corners = corners @ to_world[:3, :3].T + to_world[:3, 3]
     uv, depth = project(corners, camera)
     region = np.zeros((camera.height, camera.width), dtype=bool)
     if np.any(depth <= 0):  # a camera inside or beside the box: no useful rectangle

@@ -159,9 +159,11 @@ def find_masks(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str
     """
     colour = objectbox.background_colour([pixels[p.image_name] for p in photos])
     if colour is not None:
-        return {p.name: objectbox.foreground_mask(
-            pixels[p.image_name], colour,
-            objectbox.box_region(aabb[0], aabb[1], p.camera, np.eye(4))) for p in photos}, "colour"
+        masks = {}
+        for p in photos:
+            region = objectbox.box_region(aabb, p.camera)
+            masks[p.name] = objectbox.foreground_mask(pixels[p.image_name], colour, region)
+        return masks, "colour"
     keypoints = {p.name: _object_keypoints(sfm, p, transform, aabb) for p in photos}
     if min(len(k) for k in keypoints.values()) < objectbox.HULL_POINTS:
         return {}, "none"

@@ -1,0 +1,114 @@
+"""The fast model end to end: sizing, growth, a checkpoint round trip, the fused render path against
+the PyTorch one, and a learning race against the NeRF at the same time budget."""
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from windowshop.config import FastConfig, FitConfig
+from windowshop.field import kernels
+from windowshop.field.fast import FastModel, pixel_footprint, spherical_harmonics
+from windowshop.fit.trainer import fit
+from windowshop.model import Bounds, model_config
+from windowshop.rays import camera_rays
+from windowshop.scene.synthetic import synthetic_scene
+
+LEGO_TINY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "lego_tiny.npz"
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synthetic_scene(n_train=12, n_test=2, size=32)
+
+
+def trained(scene, steps=40, **overrides):
+    """A FastModel after `steps` plain training steps on the scene's training rays."""
+    torch.manual_seed(0)
+    config = FastModel.for_scene(FastConfig(occupancy_warmup=10, occupancy_every=5, **overrides), scene)
+    model = FastModel(config, Bounds.of_scene(scene))
+    optimizer = model.make_optimizer()
+    views = scene.split("train")
+    rays = [camera_rays(v.camera) for v in views]
+    origins = torch.cat([o for o, _ in rays])
+    directions = torch.cat([d for _, d in rays])
+    target = torch.cat([torch.from_numpy(v.image.reshape(-1, 3)) for v in views])
+    white = torch.ones(1024, 3)
+    for step in range(steps):
+        model.before_step(step, step / steps)
+        pick = torch.randint(len(origins), (1024,))
+        out = model.render_rays(origins[pick], directions[pick], white)
+        optimizer.zero_grad()
+        model.loss(out, target[pick]).backward()
+        optimizer.step()
+    return model.eval()
+
+
+def test_the_grid_is_sized_by_the_photos_pixels(scene):
+    config = FastModel.for_scene(FastConfig(), scene)
+    extent = scene.aabb[1] - scene.aabb[0]
+    voxel = (extent.prod() / config.voxels) ** (1 / 3)
+    assert voxel == pytest.approx(pixel_footprint(scene), rel=0.01)
+    finer = FastModel.for_scene(FastConfig(voxel_pixels=0.5), scene)
+    assert finer.voxels == pytest.approx(8 * config.voxels, rel=0.01)
+    assert FastModel.for_scene(FastConfig(voxels=1000), scene).voxels == 1000
+
+
+def test_spherical_harmonics_are_orthonormal_on_the_sphere():
+    d = torch.nn.functional.normalize(torch.randn(200_000, 3, dtype=torch.float64), dim=-1)
+    basis = spherical_harmonics(d, 3)
+    gram = basis.T @ basis * (4 * torch.pi / len(d))
+    torch.testing.assert_close(gram, torch.eye(16, dtype=torch.float64), atol=0.02, rtol=0)
+
+
+def test_grids_grow_and_empty_space_is_skipped(scene):
+    model = trained(scene)
+    config = model.config
+    assert model.density.shape == model.target_shape(1.0)
+    assert model.density.numel == pytest.approx(config.voxels, rel=0.15)
+    assert 0.0 < model.occupancy.fraction() < 0.8  # the object fills much of its tight box
+
+
+def test_a_checkpoint_rebuilds_the_same_model(scene):
+    model = trained(scene, steps=25)
+    fresh = FastModel(model.config, model.bounds)
+    assert fresh.density.shape != model.density.shape  # it starts coarse ...
+    fresh.load_state_dict(model.state_dict())  # ... and takes the checkpoint's shapes
+    fresh.eval()
+    origins, directions = camera_rays(scene.split("test")[0].camera)
+    with torch.no_grad():
+        a = model.render_rays(origins, directions, torch.ones(len(origins), 3))
+        b = fresh.render_rays(origins, directions, torch.ones(len(origins), 3))
+    torch.testing.assert_close(a.rgb, b.rgb)
+
+
+@pytest.mark.skipif(not kernels.available("cpu"), reason="no C compiler")
+def test_the_fused_render_path_matches_the_pytorch_path(scene, monkeypatch):
+    model = trained(scene)
+    origins, directions = camera_rays(scene.split("test")[0].camera)
+    white = torch.ones(len(origins), 3)
+    with torch.no_grad():
+        fused = model.render_rays(origins, directions, white)
+        monkeypatch.setattr(kernels, "available", lambda device: False)
+        plain = model.render_rays(origins, directions, white)
+    assert fused.num_samples <= plain.num_samples  # early termination, and fewer kept
+    # rays stop at transmittance render_threshold: colours differ by at most about that much
+    assert (fused.rgb - plain.rgb).abs().max() < 10 * model.config.render_threshold
+    assert (fused.opacity - plain.opacity).abs().max() < 2 * model.config.render_threshold
+
+
+@pytest.mark.skipif(not LEGO_TINY.is_file(), reason="shared test data not present")
+def test_fast_beats_the_nerf_at_the_same_time_budget(tmp_path):
+    from windowshop.scene import load_scene
+
+    scene = load_scene(LEGO_TINY)
+    budget = FitConfig(iters=None, seconds=12.0, batch_rays=4096, seed=0)
+    fast = fit(scene, "fast", model_config("fast"), budget, tmp_path / "fast", "cpu",
+               show_progress=False)
+    # the strongest NeRF for a budget this short (tests/test_fit_learning.py's)
+    nerf_config = model_config("nerf", "tiny", depth=4, width=64, n_coarse=32, lr=5e-3,
+                               lr_final=5e-4, density_activation="softplus")
+    nerf = fit(scene, "nerf", nerf_config, FitConfig(iters=None, seconds=12.0, batch_rays=512, seed=0),
+               tmp_path / "nerf", "cpu", show_progress=False)
+    assert fast["psnr"] >= nerf["psnr"] + 5.0, (fast["psnr"], nerf["psnr"])
+    assert fast["psnr"] >= 24.0

@@ -160,7 +160,8 @@ def cmd_video(args: argparse.Namespace) -> None:
               {"train_seconds": args.seconds or base.train_seconds})
     settings = replace(base, model=args.model, **budget, frames=args.frames, fps=args.fps,
                        frame_size=args.size,
-                       prepare=replace(base.prepare, max_side=args.max_side, verbose=args.verbose))
+                       prepare=replace(base.prepare, max_side=args.max_side or None,
+                                       verbose=args.verbose))
     make_video(args.input, args.out, settings, work_dir=args.work, device=pick_device(args.device))
 
 
@@ -306,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--seconds", type=float, default=None, help="training seconds (default 60)")
     budget.add_argument("--iters", type=int, default=None, help="or training steps")
-    p.add_argument("--max-side", type=int, default=640, help="working resolution of the photos")
+    p.add_argument("--max-side", type=int, default=640,
+                   help="working resolution of the photos (0: keep their size)")
     p.add_argument("--frames", type=int, default=60, help="turntable frames")
     p.add_argument("--fps", type=float, default=30.0)
     p.add_argument("--size", type=int, default=256, help="pixels a side of the turntable")

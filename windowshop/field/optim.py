@@ -7,6 +7,8 @@ parameter whose shape changed since the last step (a grid that grew) starts its 
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from windowshop.field import kernels
@@ -35,7 +37,9 @@ def _unique_rows(grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     if not bool((rows[1:] > rows[:-1]).all()):
         grad = grad.coalesce()
         rows, values = grad.indices()[0], grad.values()
-    return rows.contiguous(), values.reshape(rows.shape[0], -1).contiguous()
+    # An explicit width: reshape(0, -1) is ambiguous when no row received a gradient.
+    width = math.prod(values.shape[1:])
+    return rows.contiguous(), values.reshape(rows.shape[0], width).contiguous()
 
 
 class GridAdam(torch.optim.Optimizer):

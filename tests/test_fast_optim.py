@@ -62,3 +62,12 @@ def test_adam_rows_kernel_equals_reference():
     _adam_rows_reference(*copies, rows, grad, 0.01, (0.9, 0.99), 1e-15, 7)
     for ours, ref in zip(tensors, copies):
         torch.testing.assert_close(ours, ref)
+
+
+def test_a_sparse_gradient_without_rows_changes_nothing():
+    p = torch.nn.Parameter(torch.ones(5, 3))
+    opt = GridAdam([p], lr=0.1)
+    p.grad = torch.sparse_coo_tensor(torch.zeros(1, 0, dtype=torch.long), torch.zeros(0, 3), (5, 3),
+                                     check_invariants=True)
+    opt.step()
+    assert torch.equal(p.detach(), torch.ones(5, 3))

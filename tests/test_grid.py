@@ -71,7 +71,7 @@ def test_gradient_matches_finite_differences():
 @pytest.mark.parametrize("channels", [1, 12])
 def test_fused_kernels_equal_the_reference(channels):
     torch.manual_seed(1)
-    shape = (7, 9, 8)
+    shape = (21, 9, 8)  # wide enough in x for the backward's per-thread slabs
     fused = DenseGrid(shape, channels, BOX)
     plain = DenseGrid(shape, channels, BOX, fused=False)
     with torch.no_grad():
@@ -117,3 +117,32 @@ def test_a_grid_can_grow_while_the_last_steps_graph_is_alive(fused):
     grid.resize((6, 7, 8))
     grid(points).sum().backward()
     assert grid.values.grad.shape == (6 * 7 * 8, 2)
+
+
+@needs_kernels
+def test_fused_ray_sample_kernels_equal_the_reference():
+    """Values at packed ray samples, and their per-ray weighted sums, with both gradients."""
+    torch.manual_seed(2)
+    shape, channels = (16, 8, 7), 16
+    fused = DenseGrid(shape, channels, BOX)
+    plain = DenseGrid(shape, channels, BOX, fused=False)
+    with torch.no_grad():
+        fused.values.copy_(torch.randn_like(fused.values))
+        plain.values.copy_(fused.values)
+    origins = torch.randn(20, 3) * 4
+    directions = torch.nn.functional.normalize(-origins + torch.randn(20, 3), dim=-1)
+    counts = torch.randint(0, 9, (20,))
+    ray = torch.repeat_interleave(torch.arange(20), counts)
+    t = torch.rand(len(ray)) * 8
+    weights = torch.rand(len(ray))
+    probe_samples, probe_rays = torch.randn(len(ray), channels), torch.randn(20, channels)
+    results = []
+    for grid in (fused, plain):
+        w = weights.clone().requires_grad_()
+        along = grid.along_rays(origins, directions, t, ray)
+        summed = grid.composite(origins, directions, t, w, ray, counts)
+        ((along * probe_samples).sum() + (summed * probe_rays).sum()).backward()
+        results.append((along, summed, w.grad, grid.values.grad.to_dense()))
+    assert fused.values.grad.is_sparse and not plain.values.grad.is_sparse
+    for ours, ref in zip(*results):
+        torch.testing.assert_close(ours, ref, rtol=1e-4, atol=1e-4)

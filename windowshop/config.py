@@ -54,8 +54,9 @@ NERF_PRESETS = {
 @dataclass(frozen=True)
 class FastConfig:
     """The fast grid model (windowshop.field.fast): a density grid and a feature grid over the
-    object's box, read by trilinear interpolation; a tiny MLP turns features and the view direction
-    into colour. Samples are marched only through occupied cells; the grids grow coarse to fine.
+    object's box, read by trilinear interpolation; each ray's features are composited and a tiny
+    MLP turns them and the view direction into its colour. Samples are marched only through
+    occupied cells; the grids grow coarse to fine.
     Sizes are in voxels of the box, so they mean the same for any scene."""
 
     voxels: int | None = None  # voxels at the end of the growth; None: from the pixel size (below)
@@ -65,22 +66,20 @@ class FastConfig:
     growth: tuple[float, ...] = (0.1, 0.2, 0.3)  # progress at which the grid grows (geometrically)
     features: int = 16  # channels of the feature grid (16 floats: one cache line per vertex)
     hidden: int = 64  # width of the colour MLP's one hidden layer
-    deferred: bool = True  # decode each ray's composited features once, not every sample's
     mlp_bf16: bool = True  # run the MLP in bfloat16 where the hardware has it (CPU: AVX512-BF16)
     sh_degree: int = 2  # spherical harmonics of the view direction fed to it (-1: no view dependence)
     step: float = 0.5  # marching step, in voxels of the current grid
     alpha_init: float = 1e-2  # opacity of one final-resolution step at initialisation
-    lr_grid: float = 0.1  # Adam on both grids ...
-    lr_mlp: float = 3e-3  # ... and on the MLP
-    lr_final: float = 0.1  # learning rates decay exponentially to this factor
+    lr_grid: float = 0.2  # Adam on both grids ...
+    lr_mlp: float = 1e-2  # ... and on the MLP
+    lr_final: float = 0.3  # learning rates decay exponentially to this factor
     occupancy_warmup: int = 64  # steps before empty cells are first skipped
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
     weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
     render_threshold: float = 1e-3  # ... when rendering, where rays also stop at this transmittance
     distortion: float = 0.0  # weight of mip-NeRF 360's distortion loss (concentrates each ray's weight)
-    tv_density: float = 0.0  # total-variation weight on the density grid at the samples
-    tv_features: float = 0.0  # ... and on the feature grid
+    tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
 
 
 FAST_PRESETS = {
@@ -108,7 +107,7 @@ class FitConfig:
 
     iters: int | None = 3000  # stop after this many steps in total (None: no step limit)
     seconds: float | None = None  # or after this many seconds of training in total
-    batch_rays: int = 1024  # rays per step, drawn uniformly from the pixels of every training view
+    batch_rays: int | None = None  # rays per step, drawn from every training view (None: the model's)
     seed: int = 0
     log_every: int = 50  # steps between lines of log.jsonl
     checkpoint_every: int = 1000  # steps between checkpoints (one is always written at the end)

@@ -52,6 +52,7 @@ class RadianceModel(nn.Module):
 
     name: str = ""
     config_type: type = object  # the frozen dataclass of its settings
+    batch_rays: int = 1024  # rays per training step unless FitConfig.batch_rays says otherwise
     presets: dict[str, Any] = {}  # named instances of config_type; the first is the default
 
     def __init__(self, config: Any, bounds: Bounds):

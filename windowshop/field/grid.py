@@ -13,6 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from windowshop.field import kernels
+from windowshop.render.packed import ray_sum
 
 
 def corner_weights(points: torch.Tensor, shape: tuple[int, int, int]
@@ -43,8 +44,15 @@ def trilinear_reference(values: torch.Tensor, shape: tuple[int, int, int],
     return (gathered * weights[..., None]).sum(dim=1)
 
 
+def _sparse_gradient(accum: torch.Tensor, touched: torch.Tensor) -> torch.Tensor:
+    """The rows accumulated in a grid's scratch buffers as a sparse gradient (clearing them)."""
+    rows, rows_grad = kernels.harvest(accum, touched)
+    return torch.sparse_coo_tensor(rows[None], rows_grad, accum.shape, is_coalesced=True,
+                                   check_invariants=False)  # sorted and unique by construction
+
+
 class _FusedTrilinear(torch.autograd.Function):
-    """The kernel pair; the gradient of `values` is a coalesced sparse tensor of touched rows."""
+    """The kernel pair at points; the values' gradient is sparse (the touched rows)."""
 
     @staticmethod
     def forward(ctx, values: torch.Tensor, points: torch.Tensor, grid: "DenseGrid") -> torch.Tensor:
@@ -55,13 +63,52 @@ class _FusedTrilinear(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_out: torch.Tensor):
         (points,) = ctx.saved_tensors
-        grid = ctx.grid
-        accum, touched = grid.scratch()
-        kernels.trilinear_backward(points, grid.shape, grad_out.contiguous(), accum, touched)
-        rows, rows_grad = kernels.harvest(accum, touched)
-        grad = torch.sparse_coo_tensor(rows[None], rows_grad, accum.shape, is_coalesced=True,
-                                       check_invariants=False)  # sorted, unique by construction
-        return grad, None, None
+        accum, touched = ctx.grid.scratch()
+        kernels.trilinear_backward(points, ctx.grid.shape, grad_out.contiguous(), accum, touched)
+        return _sparse_gradient(accum, touched), None, None
+
+
+class _FusedAlongRays(torch.autograd.Function):
+    """The kernel pair at packed ray samples (points never materialised)."""
+
+    @staticmethod
+    def forward(ctx, values, grid: "DenseGrid", origins, directions, t, ray):
+        ctx.save_for_backward(origins, directions, t, ray)
+        ctx.grid = grid
+        lo, inv_voxel = grid.mapping()
+        return kernels.trilinear_rays_forward(values.detach(), grid.shape,
+                                              (origins, directions, t, ray), lo, inv_voxel)
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):
+        grid, accum, touched = ctx.grid, *ctx.grid.scratch()
+        kernels.trilinear_rays_backward(grid.shape, ctx.saved_tensors, *grid.mapping(),
+                                        grad_out.contiguous(), accum, touched)
+        return _sparse_gradient(accum, touched), None, None, None, None, None
+
+
+class _FusedComposite(torch.autograd.Function):
+    """Per-ray weighted sums of the values at packed ray samples, in one kernel pair."""
+
+    @staticmethod
+    def forward(ctx, values, weights, grid: "DenseGrid", origins, directions, t, ray, counts):
+        lo, inv_voxel = grid.mapping()
+        rays = (origins, directions, t, ray)
+        out, features = kernels.composite_rays_forward(values.detach(), grid.shape, rays,
+                                                       weights.detach().contiguous(), counts, lo,
+                                                       inv_voxel)
+        ctx.save_for_backward(origins, directions, t, ray, weights, features)
+        ctx.grid = grid
+        return out
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):
+        *rays, weights, features = ctx.saved_tensors
+        grid, accum, touched = ctx.grid, *ctx.grid.scratch()
+        grad_w = kernels.composite_rays_backward(grid.shape, tuple(rays), weights.detach().contiguous(),
+                                                 *grid.mapping(), features, grad_out.contiguous(),
+                                                 accum, touched)
+        return _sparse_gradient(accum, touched), grad_w, None, None, None, None, None, None
 
 
 class DenseGrid(nn.Module):
@@ -99,9 +146,42 @@ class DenseGrid(nn.Module):
     def forward(self, points: torch.Tensor) -> torch.Tensor:
         """Values (N, channels) at world `points` (N, 3); outside the box, at its nearest face."""
         g = self.to_grid(points.detach())
-        if self.fused and kernels.available(g.device) and g.dtype == torch.float32:
+        if self._fused_for(g):
             return _FusedTrilinear.apply(self.values, g, self)
         return trilinear_reference(self.values, self.shape, g)
+
+    def along_rays(self, origins: torch.Tensor, directions: torch.Tensor, t: torch.Tensor,
+                   ray: torch.Tensor) -> torch.Tensor:
+        """Values (N, C) at packed ray samples: origins[ray] + t * directions[ray].
+
+        `origins`, `directions` (R, 3); `t` (N,); `ray` (N,) int64.
+        """
+        if self._fused_for(origins):
+            return _FusedAlongRays.apply(self.values, self, origins.contiguous(),
+                                         directions.contiguous(), t.contiguous(), ray.contiguous())
+        points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
+        return trilinear_reference(self.values, self.shape, self.to_grid(points))
+
+    def composite(self, origins: torch.Tensor, directions: torch.Tensor, t: torch.Tensor,
+                  weights: torch.Tensor, ray: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
+        """Per-ray sums (R, C) of `weights` (N,) times the values at packed ray samples.
+
+        Samples are sorted by ray, `counts` (R,) int64 of them per ray; gradients reach the values
+        and the weights.
+        """
+        if self._fused_for(origins):
+            return _FusedComposite.apply(self.values, weights, self, origins.contiguous(),
+                                         directions.contiguous(), t.contiguous(), ray.contiguous(),
+                                         counts.contiguous())
+        values = self.along_rays(origins, directions, t, ray)
+        return ray_sum(weights[:, None] * values, ray, counts.shape[0])
+
+    def mapping(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(lo (3,), inv_voxel (3,)): grid units are (x - lo) * inv_voxel."""
+        return self.aabb[0].contiguous(), (1.0 / self.voxel).contiguous()
+
+    def _fused_for(self, like: torch.Tensor) -> bool:
+        return self.fused and kernels.available(like.device) and like.dtype == torch.float32
 
     def vertex_values(self) -> torch.Tensor:
         """The values as a (channels, X, Y, Z) volume (a view for channels == 1)."""

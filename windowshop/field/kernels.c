@@ -11,7 +11,11 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 typedef int64_t i64;
 
@@ -41,37 +45,77 @@ static inline i64 corners(const float *p, i64 X, i64 Y, i64 Z, i64 off[8], float
     return (ix * Y + iy) * Z + iz;
 }
 
+/* o (C,) = trilinear interpolation of values (X*Y*Z, C) at point p (grid units). */
+static inline void interp(const float *values, i64 X, i64 Y, i64 Z, i64 C, const float *p,
+                          float *o) {
+    i64 off[8];
+    float w[8];
+    i64 base = corners(p, X, Y, Z, off, w);
+    for (i64 ch = 0; ch < C; ch++) o[ch] = 0.0f;
+    for (int c = 0; c < 8; c++) {
+        const float *v = values + (base + off[c]) * C;
+        for (i64 ch = 0; ch < C; ch++) o[ch] += w[c] * v[ch];
+    }
+}
+
+/* accum (X*Y*Z, C) += the gradient of interp at p given its output's gradient g (C,). */
+static inline void scatter(const float *p, i64 X, i64 Y, i64 Z, i64 C, const float *g,
+                           float *accum, uint8_t *touched) {
+    i64 off[8];
+    float w[8];
+    i64 base = corners(p, X, Y, Z, off, w);
+    for (int c = 0; c < 8; c++) {
+        i64 row = base + off[c];
+        float *a = accum + row * C;
+        for (i64 ch = 0; ch < C; ch++) a[ch] += w[c] * g[ch];
+        touched[row] = 1;
+    }
+}
+
 /* out (N, C) = trilinear interpolation of values (X*Y*Z, C) at points (N, 3). */
 void trilinear_forward(const float *values, i64 X, i64 Y, i64 Z, i64 C, const float *points,
                        i64 N, float *out) {
 #pragma omp parallel for schedule(static)
-    for (i64 n = 0; n < N; n++) {
-        i64 off[8];
-        float w[8];
-        i64 base = corners(points + 3 * n, X, Y, Z, off, w);
-        float *o = out + n * C;
-        for (i64 ch = 0; ch < C; ch++) o[ch] = 0.0f;
-        for (int c = 0; c < 8; c++) {
-            const float *v = values + (base + off[c]) * C;
-            for (i64 ch = 0; ch < C; ch++) o[ch] += w[c] * v[ch];
-        }
-    }
+    for (i64 n = 0; n < N; n++) interp(values, X, Y, Z, C, points + 3 * n, out + n * C);
+}
+
+/* The x cell of point p: the first index of the rows its interpolation reads. */
+static inline i64 cell_x(const float *p, i64 X) {
+    i64 i;
+    float f;
+    cell_of(p[0], X, &i, &f);
+    return i;
 }
 
 /* accum (X*Y*Z, C) += the gradient of the interpolation at points (N, 3) given grad_out (N, C);
- * touched[row] = 1 for every row written. Serial: rows are shared between samples. */
+ * touched[row] = 1 for every row written. Rows are shared between samples, so each thread owns a
+ * slab of x and scatters the samples whose rows (x cells ix and ix + 1) lie inside it; the few
+ * samples straddling two slabs are scattered serially afterwards. */
 void trilinear_backward(const float *points, i64 N, i64 X, i64 Y, i64 Z, i64 C,
                         const float *grad_out, float *accum, uint8_t *touched) {
+    i64 slabs = 1;
+#ifdef _OPENMP
+    slabs = omp_get_max_threads();
+#endif
+    if (slabs < 2 || X < 4 * slabs) {
+        for (i64 n = 0; n < N; n++)
+            scatter(points + 3 * n, X, Y, Z, C, grad_out + n * C, accum, touched);
+        return;
+    }
+#pragma omp parallel for schedule(static, 1)
+    for (i64 s = 0; s < slabs; s++) {
+        i64 x0 = s * X / slabs, x1 = (s + 1) * X / slabs;
+        for (i64 n = 0; n < N; n++) {
+            i64 ix = cell_x(points + 3 * n, X);
+            if (ix >= x0 && ix + 1 < x1)
+                scatter(points + 3 * n, X, Y, Z, C, grad_out + n * C, accum, touched);
+        }
+    }
     for (i64 n = 0; n < N; n++) {
-        i64 off[8];
-        float w[8];
-        i64 base = corners(points + 3 * n, X, Y, Z, off, w);
-        const float *g = grad_out + n * C;
-        for (int c = 0; c < 8; c++) {
-            i64 row = base + off[c];
-            float *a = accum + row * C;
-            for (i64 ch = 0; ch < C; ch++) a[ch] += w[c] * g[ch];
-            touched[row] = 1;
+        i64 ix = cell_x(points + 3 * n, X);
+        for (i64 s = 1; s < slabs; s++) {
+            if (ix + 1 == s * X / slabs)
+                scatter(points + 3 * n, X, Y, Z, C, grad_out + n * C, accum, touched);
         }
     }
 }
@@ -101,30 +145,58 @@ static inline float sample_t(float t0, i64 k, float offset, float step) {
     return t0 + ((float)k + offset) * step;
 }
 
-/* Whether the point at distance t along the ray lies in an occupied cell of occ (OX, OY, OZ). */
-static inline int occupied(const float *o, const float *d, float t, const float *lo,
-                           const float *inv_cell, const uint8_t *occ, i64 OX, i64 OY, i64 OZ) {
-    i64 dims[3] = {OX, OY, OZ}, idx[3];
+#define BLOCK 4 /* cells per side of a coarse occupancy block */
+
+/* An occupancy grid of dims cells tiling the box from lo (inv_cell cells per unit length), and
+ * its coarse twin: block (i, j, k) is set when any of its BLOCK^3 cells is. */
+typedef struct {
+    const uint8_t *occ, *coarse;
+    i64 dims[3], cdims[3];
+    const float *lo, *inv_cell;
+} Occupancy;
+
+/* Visit sample k (at distance t) of the ray o + t d: *hit says whether its cell is occupied.
+ * Returns the next sample worth visiting: k + 1, or, in an empty block, the first sample one step
+ * before the block's exit (so rounding can never skip a sample of the next block). */
+static inline i64 visit(const Occupancy *g, const float *o, const float *d, float t, float t0,
+                        float offset, float step, i64 k, int *hit) {
+    i64 idx[3], c[3];
+    float p[3];
     for (int a = 0; a < 3; a++) {
-        float p = o[a] + t * d[a];
-        i64 i = (i64)floorf((p - lo[a]) * inv_cell[a]);
-        idx[a] = i < 0 ? 0 : (i >= dims[a] ? dims[a] - 1 : i);
+        p[a] = o[a] + t * d[a];
+        i64 i = (i64)floorf((p[a] - g->lo[a]) * g->inv_cell[a]);
+        idx[a] = i < 0 ? 0 : (i >= g->dims[a] ? g->dims[a] - 1 : i);
+        c[a] = idx[a] / BLOCK;
     }
-    return occ[(idx[0] * OY + idx[1]) * OZ + idx[2]];
+    if (g->coarse[(c[0] * g->cdims[1] + c[1]) * g->cdims[2] + c[2]]) {
+        *hit = g->occ[(idx[0] * g->dims[1] + idx[1]) * g->dims[2] + idx[2]];
+        return k + 1;
+    }
+    *hit = 0;
+    float t_exit = INFINITY;
+    for (int a = 0; a < 3; a++) {
+        if (d[a] == 0.0f) continue;
+        float face = g->lo[a] + (float)((d[a] > 0.0f ? c[a] + 1 : c[a]) * BLOCK) / g->inv_cell[a];
+        float ta = t + (face - p[a]) / d[a];
+        t_exit = ta < t_exit ? ta : t_exit;
+    }
+    float next = ceilf((t_exit - step - t0) / step - offset);
+    return next > (float)(k + 1) ? (i64)next : k + 1;
 }
 
 /* Samples of each ray in [t_min, t_max) whose cell is occupied: counts (R,) only. */
 void march_count(const float *origins, const float *dirs, const float *t_min, const float *t_max,
-                 const float *offsets, i64 R, float step, const uint8_t *occ, i64 OX, i64 OY,
-                 i64 OZ, const float *lo, const float *inv_cell, i64 *counts) {
+                 const float *offsets, i64 R, float step, const Occupancy *g, i64 *counts) {
 #pragma omp parallel for schedule(dynamic, 64)
     for (i64 r = 0; r < R; r++) {
         i64 n = 0;
         const float *o = origins + 3 * r, *d = dirs + 3 * r;
-        for (i64 k = 0;; k++) {
+        for (i64 k = 0;;) {
             float t = sample_t(t_min[r], k, offsets[r], step);
             if (!(t < t_max[r])) break;
-            n += occupied(o, d, t, lo, inv_cell, occ, OX, OY, OZ);
+            int hit;
+            k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
+            n += hit;
         }
         counts[r] = n;
     }
@@ -132,17 +204,18 @@ void march_count(const float *origins, const float *dirs, const float *t_min, co
 
 /* The same samples written out: distances t (S,) and ray indices (S,), ray r from starts[r]. */
 void march_fill(const float *origins, const float *dirs, const float *t_min, const float *t_max,
-                const float *offsets, i64 R, float step, const uint8_t *occ, i64 OX, i64 OY,
-                i64 OZ, const float *lo, const float *inv_cell, const i64 *starts, float *t_out,
-                i64 *ray_out) {
+                const float *offsets, i64 R, float step, const Occupancy *g, const i64 *starts,
+                float *t_out, i64 *ray_out) {
 #pragma omp parallel for schedule(dynamic, 64)
     for (i64 r = 0; r < R; r++) {
         i64 s = starts[r];
         const float *o = origins + 3 * r, *d = dirs + 3 * r;
-        for (i64 k = 0;; k++) {
+        for (i64 k = 0;;) {
             float t = sample_t(t_min[r], k, offsets[r], step);
             if (!(t < t_max[r])) break;
-            if (occupied(o, d, t, lo, inv_cell, occ, OX, OY, OZ)) {
+            int hit;
+            k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
+            if (hit) {
                 t_out[s] = t;
                 ray_out[s] = r;
                 s++;
@@ -178,9 +251,7 @@ typedef struct {
     const float *origins, *dirs, *t_min, *t_max;
     i64 R;
     float step;
-    const uint8_t *occ;
-    i64 OX, OY, OZ;
-    const float *lo, *inv_cell;
+    const Occupancy *grid;
     const float *density;
     i64 X, Y, Z;
     const float *inv_voxel;
@@ -195,16 +266,16 @@ static i64 render_ray(const RenderMarch *m, i64 r, float *t_out, float *w_out, i
     const float *o = m->origins + 3 * r, *d = m->dirs + 3 * r;
     float trans = 1.0f, acc_depth = 0.0f;
     i64 n = 0;
-    for (i64 k = 0;; k++) {
+    for (i64 k = 0;;) {
         float t = sample_t(m->t_min[r], k, 0.5f, m->step);
         if (!(t < m->t_max[r]) || trans < m->threshold) break;
-        if (!occupied(o, d, t, m->lo, m->inv_cell, m->occ, m->OX, m->OY, m->OZ)) continue;
+        int hit;
+        k = visit(m->grid, o, d, t, m->t_min[r], 0.5f, m->step, k, &hit);
+        if (!hit) continue;
         float g[3];
-        for (int a = 0; a < 3; a++) g[a] = (o[a] + t * d[a] - m->lo[a]) * m->inv_voxel[a];
-        i64 off[8];
-        float w[8], raw = 0.0f;
-        i64 base = corners(g, m->X, m->Y, m->Z, off, w);
-        for (int c = 0; c < 8; c++) raw += w[c] * m->density[base + off[c]];
+        for (int a = 0; a < 3; a++) g[a] = (o[a] + t * d[a] - m->grid->lo[a]) * m->inv_voxel[a];
+        float raw;
+        interp(m->density, m->X, m->Y, m->Z, 1, g, &raw);
         float alpha = 1.0f - expf(-softplus(raw + m->shift) * m->scale * m->step);
         float weight = trans * alpha;
         acc_depth += weight * t;
@@ -238,4 +309,84 @@ void render_march_fill(const RenderMarch *m, const i64 *starts, float *t_out, fl
         i64 s = starts[r];
         render_ray(m, r, t_out + s, w_out + s, ray_out + s, opacity + r, depth + r);
     }
+}
+
+/* Grid units of sample i of packed ray samples: origins[ray[i]] + t[i] * dirs[ray[i]]. */
+static inline void sample_point(const float *origins, const float *dirs, const float *t,
+                                const i64 *ray, i64 i, const float *lo, const float *inv_voxel,
+                                float g[3]) {
+    const float *o = origins + 3 * ray[i], *d = dirs + 3 * ray[i];
+    for (int a = 0; a < 3; a++) g[a] = (o[a] + t[i] * d[a] - lo[a]) * inv_voxel[a];
+}
+
+/* Interpolate values (X*Y*Z, C) at each of N ray samples: out (N, C). */
+void trilinear_rays_forward(const float *values, i64 X, i64 Y, i64 Z, i64 C,
+                            const float *origins, const float *dirs, const float *t,
+                            const i64 *ray, i64 N, const float *lo, const float *inv_voxel,
+                            float *out) {
+#pragma omp parallel for schedule(static)
+    for (i64 n = 0; n < N; n++) {
+        float g[3];
+        sample_point(origins, dirs, t, ray, n, lo, inv_voxel, g);
+        interp(values, X, Y, Z, C, g, out + n * C);
+    }
+}
+
+/* Grid units (N, 3) of all N ray samples, into points. */
+static void ray_points(const float *origins, const float *dirs, const float *t, const i64 *ray,
+                       i64 N, const float *lo, const float *inv_voxel, float *points) {
+#pragma omp parallel for schedule(static)
+    for (i64 n = 0; n < N; n++) sample_point(origins, dirs, t, ray, n, lo, inv_voxel, points + 3 * n);
+}
+
+/* The gradient of trilinear_rays_forward: accum (X*Y*Z, C) += ..., touched rows marked.
+ * points (N, 3) is scratch space. */
+void trilinear_rays_backward(i64 X, i64 Y, i64 Z, i64 C, const float *origins, const float *dirs,
+                             const float *t, const i64 *ray, i64 N, const float *lo,
+                             const float *inv_voxel, const float *grad_out, float *accum,
+                             uint8_t *touched, float *points) {
+    ray_points(origins, dirs, t, ray, N, lo, inv_voxel, points);
+    trilinear_backward(points, N, X, Y, Z, C, grad_out, accum, touched);
+}
+
+/* Per-ray weighted sums out (R, C) = sum_i w[i] f_i of the interpolated values f_i (saved to
+ * features (N, C)) of ray samples sorted by ray, ray r's from starts[r] for counts[r]. */
+void composite_rays_forward(const float *values, i64 X, i64 Y, i64 Z, i64 C,
+                            const float *origins, const float *dirs, const float *t,
+                            const i64 *ray, const float *w, const i64 *starts, const i64 *counts,
+                            i64 R, const float *lo, const float *inv_voxel, float *features,
+                            float *out) {
+#pragma omp parallel for schedule(dynamic, 64)
+    for (i64 r = 0; r < R; r++) {
+        float *o = out + r * C;
+        for (i64 ch = 0; ch < C; ch++) o[ch] = 0.0f;
+        for (i64 n = starts[r]; n < starts[r] + counts[r]; n++) {
+            float g[3], *f = features + n * C;
+            sample_point(origins, dirs, t, ray, n, lo, inv_voxel, g);
+            interp(values, X, Y, Z, C, g, f);
+            for (i64 ch = 0; ch < C; ch++) o[ch] += w[n] * f[ch];
+        }
+    }
+}
+
+/* The gradients of composite_rays_forward given grad_out (R, C): grad_w (N,), and
+ * accum (X*Y*Z, C) += the values' gradient, touched rows marked. points (N, 3) and
+ * grad_samples (N, C) are scratch space. */
+void composite_rays_backward(i64 X, i64 Y, i64 Z, i64 C, const float *origins, const float *dirs,
+                             const float *t, const i64 *ray, const float *w, i64 N,
+                             const float *lo, const float *inv_voxel, const float *features,
+                             const float *grad_out, float *grad_w, float *accum,
+                             uint8_t *touched, float *points, float *grad_samples) {
+#pragma omp parallel for schedule(static)
+    for (i64 n = 0; n < N; n++) {
+        const float *g_out = grad_out + ray[n] * C, *f = features + n * C;
+        float dot = 0.0f, *g = grad_samples + n * C;
+        for (i64 ch = 0; ch < C; ch++) {
+            dot += f[ch] * g_out[ch];
+            g[ch] = w[n] * g_out[ch];
+        }
+        grad_w[n] = dot;
+    }
+    ray_points(origins, dirs, t, ray, N, lo, inv_voxel, points);
+    trilinear_backward(points, N, X, Y, Z, C, grad_samples, accum, touched);
 }

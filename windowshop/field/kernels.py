@@ -11,6 +11,7 @@ the documented dtypes and writes into the given outputs.
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import logging
 import os
@@ -18,7 +19,6 @@ import platform
 import shutil
 import subprocess
 import tempfile
-from functools import lru_cache
 from pathlib import Path
 
 import torch
@@ -34,21 +34,44 @@ _SIGNATURES = {
     "trilinear_backward": [_P, _I, _I, _I, _I, _I, _P, _P, _P],
     "touched_rows": [_P, _I, _P],
     "harvest_rows": [_P, _P, _I, _P, _I, _P],
-    "march_count": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P],
-    "march_fill": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _I, _P, _P, _P, _P, _P],
+    "march_count": [_P, _P, _P, _P, _P, _I, _F, _P, _P],
+    "march_fill": [_P, _P, _P, _P, _P, _I, _F, _P, _P, _P, _P],
     "adam_rows": [_P, _P, _P, _I, _P, _I, _P, _F, _F, _F, _F, _F],
+    "trilinear_rays_forward": [_P, _I, _I, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P],
+    "trilinear_rays_backward": [_I, _I, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P],
+    "composite_rays_forward": [_P, _I, _I, _I, _I, _P, _P, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P],
+    "composite_rays_backward": [_I, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _P,
+                                _P, _P],
     "render_march_count": [_P, _P],
     "render_march_fill": [_P, _P, _P, _P, _P, _P, _P],
 }
+
+
+class _Occupancy(ctypes.Structure):
+    """kernels.c's Occupancy: a fine and a coarse occupancy grid over a box."""
+
+    _fields_ = [("occ", _P), ("coarse", _P), ("dims", _I * 3), ("cdims", _I * 3), ("lo", _P),
+                ("inv_cell", _P)]
 
 
 class _RenderMarch(ctypes.Structure):
     """kernels.c's RenderMarch: the arguments of render_march_count/fill."""
 
     _fields_ = [("origins", _P), ("dirs", _P), ("t_min", _P), ("t_max", _P), ("R", _I),
-                ("step", _F), ("occ", _P), ("OX", _I), ("OY", _I), ("OZ", _I), ("lo", _P),
-                ("inv_cell", _P), ("density", _P), ("X", _I), ("Y", _I), ("Z", _I),
-                ("inv_voxel", _P), ("shift", _F), ("scale", _F), ("threshold", _F)]
+                ("step", _F), ("grid", ctypes.POINTER(_Occupancy)), ("density", _P), ("X", _I),
+                ("Y", _I), ("Z", _I), ("inv_voxel", _P), ("shift", _F), ("scale", _F),
+                ("threshold", _F)]
+
+
+BLOCK = 4  # kernels.c's BLOCK: cells per side of a coarse occupancy block
+
+
+def _occupancy(grid: tuple) -> _Occupancy:
+    """The kernels' view of `grid` = (occupied (OX, OY, OZ) uint8, coarse uint8, lo (3,),
+    inv_cell (3,)); the tensors must outlive its use."""
+    occupied, coarse, lo, inv_cell = grid
+    return _Occupancy(_ptr(occupied), _ptr(coarse), (_I * 3)(*occupied.shape),
+                      (_I * 3)(*coarse.shape), _ptr(lo), _ptr(inv_cell))
 
 
 def _cpu_id() -> str:
@@ -79,7 +102,7 @@ def _build(compiler: str, target: Path) -> None:
         raise RuntimeError(done.stderr.strip()[-2000:])
 
 
-@lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=1)
 def library() -> ctypes.CDLL | None:
     """The loaded kernel library, or None when it cannot be had (see the module docstring)."""
     if os.environ.get("WINDOWSHOP_KERNELS", "1") == "0":
@@ -110,11 +133,21 @@ def available(device: torch.device | str) -> bool:
     return torch.device(device).type == "cpu" and library() is not None
 
 
+def _profiled(fn):
+    """Name each kernel call in torch.profiler traces (calls through ctypes are invisible there)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with torch.profiler.record_function(f"kernels.{fn.__name__}"):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
 def _ptr(t: torch.Tensor) -> int:
     assert t.is_contiguous() and t.device.type == "cpu", "kernels take contiguous CPU tensors"
     return t.data_ptr()
 
 
+@_profiled
 def trilinear_forward(values: torch.Tensor, shape: tuple[int, int, int], points: torch.Tensor
                       ) -> torch.Tensor:
     """Interpolate `values` (X*Y*Z, C) float32 at `points` (N, 3) in grid units: (N, C)."""
@@ -124,6 +157,7 @@ def trilinear_forward(values: torch.Tensor, shape: tuple[int, int, int], points:
     return out
 
 
+@_profiled
 def trilinear_backward(points: torch.Tensor, shape: tuple[int, int, int], grad_out: torch.Tensor,
                        accum: torch.Tensor, touched: torch.Tensor) -> None:
     """accum (V, C) += d(interpolation)/d(values) . grad_out (N, C); touched (V,) uint8 marks rows."""
@@ -131,6 +165,69 @@ def trilinear_backward(points: torch.Tensor, shape: tuple[int, int, int], grad_o
                                  _ptr(grad_out), _ptr(accum), _ptr(touched))
 
 
+@_profiled
+def trilinear_rays_forward(values: torch.Tensor, shape: tuple[int, int, int], rays: tuple,
+                           lo: torch.Tensor, inv_voxel: torch.Tensor) -> torch.Tensor:
+    """Interpolate `values` (V, C) at ray samples `rays` = (origins (R, 3), directions (R, 3),
+    t (N,), ray (N,) int64), mapped to grid units by (x - lo) * inv_voxel: (N, C)."""
+    origins, directions, t, ray = rays
+    out = torch.empty(t.shape[0], values.shape[1], dtype=torch.float32)
+    library().trilinear_rays_forward(_ptr(values), *shape, values.shape[1], _ptr(origins),
+                                     _ptr(directions), _ptr(t), _ptr(ray), t.shape[0], _ptr(lo),
+                                     _ptr(inv_voxel), _ptr(out))
+    return out
+
+
+@_profiled
+def trilinear_rays_backward(shape: tuple[int, int, int], rays: tuple, lo: torch.Tensor,
+                            inv_voxel: torch.Tensor, grad_out: torch.Tensor, accum: torch.Tensor,
+                            touched: torch.Tensor) -> None:
+    """accum (V, C) += the values' gradient of trilinear_rays_forward; touched (V,) marks rows."""
+    origins, directions, t, ray = rays
+    points = torch.empty(t.shape[0], 3, dtype=torch.float32)
+    library().trilinear_rays_backward(*shape, accum.shape[1], _ptr(origins), _ptr(directions),
+                                      _ptr(t), _ptr(ray), t.shape[0], _ptr(lo), _ptr(inv_voxel),
+                                      _ptr(grad_out), _ptr(accum), _ptr(touched), _ptr(points))
+
+
+@_profiled
+def composite_rays_forward(values: torch.Tensor, shape: tuple[int, int, int], rays: tuple,
+                           weights: torch.Tensor, counts: torch.Tensor, lo: torch.Tensor,
+                           inv_voxel: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-ray sums (R, C) of weights (N,) times the values interpolated at the ray samples
+    (sorted by ray, `counts` (R,) per ray); also returns those interpolated values (N, C)."""
+    origins, directions, t, ray = rays
+    c = values.shape[1]
+    starts = (torch.cumsum(counts, 0) - counts).contiguous()
+    features = torch.empty(t.shape[0], c, dtype=torch.float32)
+    out = torch.empty(counts.shape[0], c, dtype=torch.float32)
+    library().composite_rays_forward(_ptr(values), *shape, c, _ptr(origins), _ptr(directions),
+                                     _ptr(t), _ptr(ray), _ptr(weights), _ptr(starts), _ptr(counts),
+                                     counts.shape[0], _ptr(lo), _ptr(inv_voxel), _ptr(features),
+                                     _ptr(out))
+    return out, features
+
+
+@_profiled
+def composite_rays_backward(shape: tuple[int, int, int], rays: tuple, weights: torch.Tensor,
+                            lo: torch.Tensor, inv_voxel: torch.Tensor, features: torch.Tensor,
+                            grad_out: torch.Tensor, accum: torch.Tensor, touched: torch.Tensor
+                            ) -> torch.Tensor:
+    """The gradient of the weights (N,) of composite_rays_forward; accum += the values'."""
+    origins, directions, t, ray = rays
+    c = accum.shape[1]
+    grad_w = torch.empty(t.shape[0], dtype=torch.float32)
+    points = torch.empty(t.shape[0], 3, dtype=torch.float32)
+    grad_samples = torch.empty(t.shape[0], c, dtype=torch.float32)
+    library().composite_rays_backward(*shape, c, _ptr(origins), _ptr(directions), _ptr(t),
+                                      _ptr(ray), _ptr(weights), t.shape[0], _ptr(lo),
+                                      _ptr(inv_voxel), _ptr(features), _ptr(grad_out),
+                                      _ptr(grad_w), _ptr(accum), _ptr(touched), _ptr(points),
+                                      _ptr(grad_samples))
+    return grad_w
+
+
+@_profiled
 def harvest(accum: torch.Tensor, touched: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """The touched rows (M,) int64 in increasing order and their accumulated values (M, C).
 
@@ -145,15 +242,17 @@ def harvest(accum: torch.Tensor, touched: torch.Tensor) -> tuple[torch.Tensor, t
     return rows, values
 
 
+@_profiled
 def march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
-          t_max: torch.Tensor, offsets: torch.Tensor, step: float, occupancy: torch.Tensor,
-          lo: torch.Tensor, inv_cell: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Occupied samples t_min + (k + offset) step < t_max of rays (R, 3); see occupancy.march."""
+          t_max: torch.Tensor, offsets: torch.Tensor, step: float, grid: tuple
+          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Occupied samples t_min + (k + offset) step < t_max of rays (R, 3) through `grid` (see
+    _occupancy); returns t (S,), ray (S,) int64 and counts (R,) int64 as occupancy.march."""
     lib = library()
     r = origins.shape[0]
-    grid = occupancy.to(torch.uint8).contiguous()
+    occupancy = _occupancy(grid)
     common = [_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), _ptr(offsets), r, step,
-              _ptr(grid), *grid.shape, _ptr(lo), _ptr(inv_cell)]
+              ctypes.byref(occupancy)]
     counts = torch.empty(r, dtype=torch.int64)
     lib.march_count(*common, _ptr(counts))
     ends = torch.cumsum(counts, 0)
@@ -165,6 +264,7 @@ def march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
     return t, ray, counts
 
 
+@_profiled
 def adam_rows(param: torch.Tensor, exp_avg: torch.Tensor, exp_avg_sq: torch.Tensor,
               rows: torch.Tensor, grad: torch.Tensor, lr: float, betas: tuple[float, float],
               eps: float, step: int) -> None:
@@ -176,24 +276,24 @@ def adam_rows(param: torch.Tensor, exp_avg: torch.Tensor, exp_avg_sq: torch.Tens
                         rows.shape[0], _ptr(grad), lr_c, beta1, beta2, eps, sqrt_c2)
 
 
+@_profiled
 def render_march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
-                 t_max: torch.Tensor, step: float, occupancy: torch.Tensor, lo: torch.Tensor,
-                 inv_cell: torch.Tensor, density: torch.Tensor, shape: tuple[int, int, int],
-                 inv_voxel: torch.Tensor, shift: float, scale: float, threshold: float
-                 ) -> tuple[torch.Tensor, ...]:
+                 t_max: torch.Tensor, step: float, grid: tuple, density: torch.Tensor,
+                 shape: tuple[int, int, int], inv_voxel: torch.Tensor, shift: float, scale: float,
+                 threshold: float) -> tuple[torch.Tensor, ...]:
     """March rays (R, 3) at offsets 0.5 with early termination (see kernels.c render_ray).
 
-    `density` (X*Y*Z,) is the raw one-channel grid of `shape`; points map to its grid units by
-    (x - lo) * inv_voxel. Returns the samples of weight >= threshold as t (K,), weight (K,),
-    ray (K,) int64, counts (R,) int64, and per ray the opacity (R,) and depth (R,) of all samples
-    marched.
+    `grid` is the occupancy (see _occupancy); `density` (X*Y*Z,) the raw one-channel grid of
+    `shape` over the same box, points mapping to its grid units by (x - lo) * inv_voxel. Returns
+    the samples of weight >= threshold as t (K,), weight (K,), ray (K,) int64, counts (R,) int64,
+    and per ray the opacity (R,) and depth (R,) of all samples marched.
     """
     lib = library()
     r = origins.shape[0]
-    grid = occupancy.to(torch.uint8).contiguous()
+    occupancy = _occupancy(grid)
     args = _RenderMarch(_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), r, step,
-                        _ptr(grid), *grid.shape, _ptr(lo), _ptr(inv_cell), _ptr(density), *shape,
-                        _ptr(inv_voxel), shift, scale, threshold)
+                        ctypes.pointer(occupancy), _ptr(density), *shape, _ptr(inv_voxel), shift,
+                        scale, threshold)
     counts = torch.empty(r, dtype=torch.int64)
     lib.render_march_count(ctypes.byref(args), _ptr(counts))
     ends = torch.cumsum(counts, 0)

@@ -67,6 +67,21 @@ class OccupancyGrid(nn.Module):
         self.fused = fused
         self.register_buffer("aabb", aabb.detach().clone().float())
         self.register_buffer("occupied", torch.ones(cells, dtype=torch.bool))
+        # the kernels' copy: uint8 cells and blocks of kernels.BLOCK^3 cells that any occupied
+        # cell sets, so marching can jump over empty blocks whole
+        self.register_buffer("cells", torch.ones(cells, dtype=torch.uint8), persistent=False)
+        self.register_buffer("blocks", self._blocks(self.occupied), persistent=False)
+
+    @staticmethod
+    def _blocks(occupied: torch.Tensor) -> torch.Tensor:
+        volume = occupied[None, None].float()
+        return (F.max_pool3d(volume, kernel_size=kernels.BLOCK, ceil_mode=True)[0, 0] > 0).to(torch.uint8)
+
+    def set(self, occupied: torch.Tensor) -> None:
+        """Replace the occupied cells by `occupied` (OX, OY, OZ) bool (any shape)."""
+        self.occupied = occupied.to(torch.bool).contiguous()
+        self.cells = self.occupied.to(torch.uint8)
+        self.blocks = self._blocks(self.occupied)
 
     @property
     def inv_cell(self) -> torch.Tensor:
@@ -87,7 +102,7 @@ class OccupancyGrid(nn.Module):
         function of it) is above the threshold can lie in a skipped cell.
         """
         peak = F.max_pool3d(vertex[None, None], kernel_size=2, stride=1)[0, 0]
-        self.occupied = peak > threshold
+        self.set(peak > threshold)
 
     @torch.no_grad()
     def march(self, origins: torch.Tensor, directions: torch.Tensor, near: float, far: float,
@@ -98,14 +113,18 @@ class OccupancyGrid(nn.Module):
             offsets = torch.rand(origins.shape[0], device=origins.device)
         else:
             offsets = torch.full((origins.shape[0],), 0.5, device=origins.device)
-        args = (origins.contiguous(), directions.contiguous(), t_min, t_max, offsets, step,
-                self.occupied, self.aabb[0].contiguous(), self.inv_cell.contiguous())
+        args = (origins.contiguous(), directions.contiguous(), t_min, t_max, offsets, step)
         if self.fused and kernels.available(origins.device) and origins.dtype == torch.float32:
-            return Samples(*kernels.march(*args))
-        return march_reference(*args)
+            return Samples(*kernels.march(*args, self.kernel_grid()))
+        return march_reference(*args, self.occupied, self.aabb[0], self.inv_cell)
+
+    def kernel_grid(self) -> tuple:
+        """What the kernels take for this grid (kernels._occupancy)."""
+        return self.cells, self.blocks, self.aabb[0].contiguous(), self.inv_cell.contiguous()
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         saved = state_dict.get(prefix + "occupied")
         if saved is not None and saved.shape != self.occupied.shape:
             self.occupied = torch.ones(saved.shape, dtype=torch.bool, device=self.occupied.device)
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+        self.set(self.occupied)

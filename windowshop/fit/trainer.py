@@ -121,16 +121,18 @@ def _backgrounds(kind: str, rays: int, device: torch.device) -> torch.Tensor:
 
 
 def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
-    """One optimisation step on a fresh random batch of `run.config.batch_rays` rays over the
-    scene's `background` kind; advances `run.progress` and returns the step's log record."""
+    """One optimisation step on a fresh random batch of `run.config.batch_rays` rays (None: the
+    model's own `batch_rays`) over the scene's `background` kind; advances `run.progress` and
+    returns the step's log record."""
     model, optimizer, config, progress = run.model, run.optimizer, run.config, run.progress
     fraction = progress.fraction(config)
     start = time.perf_counter()
     for group in optimizer.param_groups:
         group["lr"] = group["initial_lr"] * model.lr_factor(fraction)
     model.before_step(progress.step, fraction)
-    batch = bank.sample(config.batch_rays)
-    bg = _backgrounds(background, config.batch_rays, bank.device)
+    rays = config.batch_rays or model.batch_rays
+    batch = bank.sample(rays)
+    bg = _backgrounds(background, rays, bank.device)
     target = batch.target(bg)
     out = model.render_rays(batch.origins, batch.directions, bg)
     loss = model.loss(out, target)
@@ -142,7 +144,7 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     progress.step += 1
     progress.elapsed += seconds
     return {"step": progress.step, "loss": float(loss.detach()), "psnr": psnr_of_mse(error),
-            "lr": optimizer.param_groups[0]["lr"], "rays_per_s": config.batch_rays / seconds,
+            "lr": optimizer.param_groups[0]["lr"], "rays_per_s": rays / seconds,
             "samples_per_s": out.num_samples / seconds, "elapsed": progress.elapsed}
 
 

@@ -1,0 +1,222 @@
+"""Benchmarks of the fast model (issue 6) on this machine: one JSON object per row on stdout.
+
+Rows (`--rows`, default all but gpu; each runs alone in under 10 minutes):
+  tiny       lego_tiny.npz, 100 views at 100x100, its 6 held-out views; 30 s   (target PSNR >= 27)
+  lego100    lego --downscale 4, 100 views, 25 test views; 30 s                (target PSNR >= 29)
+  lego400    lego at 400x400, 100 views, 25 test views; 300 s                  (target PSNR >= 30)
+  fewer      lego --downscale 4 with 5, 10 and 25 training views; 30 s each    (report)
+  turntable  120 frames at 256x256 of the lego100 model, rendered and encoded  (target <= 20 s)
+  gpu        lego400 on CUDA for 60 s                                          (target PSNR >= 32)
+
+Each training row records held-out PSNR against training seconds (`curve`, on a fixed random
+subset of the held-out pixels so that the NeRF's slow rendering stays affordable) and, in the same
+run, the same curve for `--model nerf --preset tiny` with the same budget (`--nerf-seconds` caps
+it; `--no-nerf` skips it). `psnr` is the fast model's mean over the full held-out views.
+Usage: python bench/bench_fast.py [--rows tiny lego100 ...] [--device cpu] [--no-nerf]
+       [--seconds S] [--nerf-seconds S]; plot the output with bench/plot_fast.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from windowshop.config import FitConfig, SceneOptions, VideoOptions
+from windowshop.device import pick_device
+from windowshop.fit.batches import PixelBank
+from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
+from windowshop.fit.trainer import Progress, TrainingRun, train_step
+from windowshop.metrics import psnr_of_mse
+from windowshop.model import Bounds, model_class, model_config
+from windowshop.rays import camera_rays
+from windowshop.render.frames import display_background, render_rays_chunked
+from windowshop.scene import load_scene
+from windowshop.video.encode import VideoOutputs
+from windowshop.video.paths import turntable_path
+from windowshop.video.turntable import render_turntable
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / ".." / "shared" / "data"
+BATCH = {"fast": 4096, "nerf": 1024}  # rays per step: each model's own setting
+PROBE_PIXELS = 4096
+
+
+def machine() -> dict:
+    """Where and when the row ran: commit, CPU, threads and the load at the start."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
+                                capture_output=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = "unknown"
+    return {"commit": commit, "platform": platform.platform(), "cpus": os.cpu_count(),
+            "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
+            "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+class Probe:
+    """A fixed random subset of the held-out pixels, and the PSNR of a model on it."""
+
+    def __init__(self, scene, device: torch.device, pixels: int = PROBE_PIXELS):
+        views = held_out_views(scene)
+        rays = [camera_rays(v.camera, device=device) for v in views]
+        origins = torch.cat([o for o, _ in rays])
+        directions = torch.cat([d for _, d in rays])
+        truth = np.concatenate([target_image(v, scene.background).reshape(-1, 3) for v in views])
+        pick = torch.randperm(len(origins), generator=torch.Generator().manual_seed(0))[:pixels]
+        self.origins, self.directions = origins[pick.to(device)], directions[pick.to(device)]
+        self.truth = torch.from_numpy(truth[pick.numpy()]).to(device)
+        self.background = torch.tensor(display_background(scene.background), device=device)
+
+    def psnr(self, model) -> float:
+        rgb, _, _ = render_rays_chunked(model, self.origins, self.directions, self.background)
+        return psnr_of_mse(float(torch.mean((rgb.clamp(0, 1) - self.truth) ** 2)))
+
+
+def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[float],
+          device: torch.device):
+    """Train `name` for `seconds` of training time, probing PSNR when it passes each mark.
+
+    The same steps as `windowshop fit` (trainer.train_step); probing is not counted as training.
+    Returns the model and {"iterations", "train_seconds", "curve": [{seconds, step, psnr}]}.
+    """
+    torch.manual_seed(0)
+    config = model_class(name).for_scene(config, scene)
+    model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
+    optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]),
+                      {}, Path(tempfile.gettempdir()), Progress())
+    bank = PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
+    model.train()
+    pending, curve = sorted(m for m in marks if m < seconds), []
+    while run.progress.fraction(run.config) < 1.0:
+        train_step(run, bank, scene.background)
+        if pending and run.progress.elapsed >= pending[0]:
+            while pending and run.progress.elapsed >= pending[0]:
+                pending.pop(0)
+            curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
+                          "psnr": round(probe.psnr(model), 3)})
+    curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
+                  "psnr": round(probe.psnr(model), 3)})
+    return model, {"iterations": run.progress.step, "train_seconds": round(run.progress.elapsed, 2),
+                   "curve": curve}
+
+
+def race(scene, seconds: float, args, device: torch.device, nerf: bool = True) -> dict:
+    """The fast model for `seconds`, evaluated in full, and the NeRF (tiny) beside it."""
+    marks = [seconds * f for f in (0.05, 0.1, 0.2, 0.35, 0.5, 0.75)]
+    probe = Probe(scene, device)
+    model, fast = train(scene, "fast", model_config("fast"), seconds, probe, marks, device)
+    start = time.perf_counter()
+    full = evaluate_views(model, held_out_views(scene), scene.background)
+    fast.update(psnr=round(full["psnr"], 3), ssim=round(full["ssim"], 4),
+                eval_seconds=round(time.perf_counter() - start, 2), voxels=model.config.voxels,
+                grid=list(model.density.shape))
+    row = {"train_views": len(scene.split("train")), "test_views": full["test_views"],
+           "seconds": seconds, "fast": fast}
+    if nerf and not args.no_nerf:  # fewer probes: each costs the NeRF seconds
+        budget = min(seconds, args.nerf_seconds or seconds)
+        _, row["nerf_tiny"] = train(scene, "nerf", model_config("nerf", "tiny"), budget, probe,
+                                    [budget * f for f in (0.25, 0.5)], device)
+    row["probe_pixels"] = len(probe.truth)
+    return row, model
+
+
+def lego(options: SceneOptions):
+    return load_scene(DATA / "lego", options)
+
+
+def row_tiny(args, device):
+    row, _ = race(load_scene(DATA / "lego_tiny.npz"), args.seconds or 30.0, args, device)
+    return {"row": "tiny", "target_psnr": 27.0, **row}
+
+
+def row_lego100(args, device, keep: dict | None = None):
+    row, model = race(lego(SceneOptions(downscale=4, test_views=25)), args.seconds or 30.0, args, device)
+    if keep is not None:
+        keep["lego100"] = model
+    return {"row": "lego100", "target_psnr": 29.0, **row}
+
+
+def row_lego400(args, device):
+    row, _ = race(lego(SceneOptions(test_views=25)), args.seconds or 300.0, args, device)
+    return {"row": "lego400", "target_psnr": 30.0, **row}
+
+
+def row_fewer(args, device):
+    """5, 10, 25 views over white (the default), then trained on random backgrounds ("alpha":
+    lego has masks, and a random background behind the object teaches its silhouette)."""
+    rows = []
+    for background in ("white", "alpha"):
+        for views in (5, 10, 25):
+            scene = lego(SceneOptions(downscale=4, views=views, test_views=25, background=background))
+            row, _ = race(scene, args.seconds or 30.0, args, device, nerf=background == "white")
+            rows.append({"views": views, "background": background, **row})
+    return {"row": "fewer", "seed_5_views_psnr": 23.0, "runs": rows}
+
+
+def row_turntable(args, device, keep: dict):
+    """Render and encode the 120-frame 256x256 orbit of the lego100 model, as `windowshop render`."""
+    if "lego100" not in keep:
+        scene = lego(SceneOptions(downscale=4, test_views=25))
+        probe = Probe(scene, device, pixels=256)
+        keep["lego100"], _ = train(scene, "fast", model_config("fast"), 30.0, probe, [], device)
+    model = keep["lego100"].eval()
+    scene = lego(SceneOptions(downscale=4, test_views=25))
+    options = VideoOptions(frames=120, width=256, height=256)
+    cameras = turntable_path([v.camera for v in scene.split("train")], options)
+    with tempfile.TemporaryDirectory() as out:
+        result = render_turntable(model, cameras, VideoOutputs(mp4=Path(out) / "turntable.mp4"),
+                                  options.fps, display_background(scene.background),
+                                  chunk=options.chunk, progress=False)
+    return {"row": "turntable", "target_seconds": 20.0, "frames": result.frames,
+            "size": [result.width, result.height], "seconds": round(result.render_seconds, 2),
+            "frames_per_second": round(result.frames_per_second, 2)}
+
+
+def row_gpu(args, device):
+    if device.type != "cuda":
+        return {"row": "gpu", "skipped": f"needs CUDA, got {device}"}
+    row, _ = race(lego(SceneOptions(test_views=25)), args.seconds or 60.0, args, device)
+    return {"row": "gpu", "target_psnr": 32.0, "gpu": torch.cuda.get_device_name(device), **row}
+
+
+ROWS = ["tiny", "lego100", "lego400", "fewer", "turntable", "gpu"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", nargs="+", choices=ROWS, default=ROWS[:-1])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--seconds", type=float, default=None, help="override every row's budget")
+    parser.add_argument("--nerf-seconds", type=float, default=None,
+                        help="cap the NeRF's budget (lego400 defaults to 200 s to stay under 10 min)")
+    parser.add_argument("--no-nerf", action="store_true", help="skip the NeRF comparison")
+    args = parser.parse_args()
+    device = pick_device(args.device)
+    keep: dict = {}
+    for name in args.rows:
+        start = time.perf_counter()
+        info = machine()
+        if name == "lego400" and args.nerf_seconds is None:
+            row = row_lego400(argparse.Namespace(**{**vars(args), "nerf_seconds": 200.0}), device)
+        elif name in ("lego100", "turntable"):
+            row = globals()[f"row_{name}"](args, device, keep)
+        else:
+            row = globals()[f"row_{name}"](args, device)
+        row.update(device=str(device), machine=info, wall_seconds=round(time.perf_counter() - start, 1))
+        print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,12 +1,13 @@
 """Benchmarks of the fast model (issue 6) on this machine: one JSON object per row on stdout.
 
-Rows (`--rows`, default all but gpu; each runs alone in under 10 minutes):
+Rows (`--rows`, default the first five; each runs alone in under 10 minutes):
   tiny       lego_tiny.npz, 100 views at 100x100, its 6 held-out views; 30 s   (target PSNR >= 27)
   lego100    lego --downscale 4, 100 views, 25 test views; 30 s                (target PSNR >= 29)
   lego400    lego at 400x400, 100 views, 25 test views; 300 s                  (target PSNR >= 30)
   fewer      lego --downscale 4 with 5, 10 and 25 training views; 30 s each    (report)
   turntable  120 frames at 256x256 of the lego100 model, rendered and encoded  (target <= 20 s)
   gpu        lego400 on CUDA for 60 s                                          (target PSNR >= 32)
+  profile    torch.profiler of training steps and turntable frames: where the time goes
 
 Each training row records held-out PSNR against training seconds (`curve`, on a fixed random
 subset of the held-out pixels so that the NeRF's slow rendering stays affordable) and, in the same
@@ -38,7 +39,7 @@ from windowshop.fit.trainer import Progress, TrainingRun, train_step
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
-from windowshop.render.frames import display_background, render_rays_chunked
+from windowshop.render.frames import display_background, render_camera, render_rays_chunked
 from windowshop.scene import load_scene
 from windowshop.video.encode import VideoOutputs
 from windowshop.video.paths import turntable_path
@@ -191,12 +192,60 @@ def row_gpu(args, device):
     return {"row": "gpu", "target_psnr": 32.0, "gpu": torch.cuda.get_device_name(device), **row}
 
 
-ROWS = ["tiny", "lego100", "lego400", "fewer", "turntable", "gpu"]
+def _top_ops(prof, per: int, rows: int = 12) -> list[dict]:
+    """The `rows` ops of a torch.profiler run with the most self CPU time, in ms per `per` units."""
+    ops = sorted(prof.key_averages(), key=lambda e: e.self_cpu_time_total, reverse=True)[:rows]
+    return [{"op": e.key, "ms": round(e.self_cpu_time_total / 1e3 / per, 2), "calls": e.count // per}
+            for e in ops]
+
+
+def row_profile(args, device):
+    """Where the time goes: torch.profiler over 20 training steps of the lego100 model (after 10 s
+    of training, so the grids are grown and the occupancy is pruned) and over 3 turntable frames.
+    The fused kernels appear as kernels.<name> and _Fused<name>."""
+    from torch.profiler import ProfilerActivity, profile
+
+    scene = lego(SceneOptions(downscale=4, test_views=25))
+    probe = Probe(scene, device, pixels=256)
+    torch.manual_seed(0)
+    config = model_class("fast").for_scene(model_config("fast"), scene)
+    model = model_class("fast")(config, Bounds.of_scene(scene)).to(device)
+    optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=10.0), {},
+                      Path(tempfile.gettempdir()), Progress())
+    bank = PixelBank(scene.split("train"), device)
+    model.train()
+    while run.progress.fraction(run.config) < 1.0:
+        train_step(run, bank, scene.background)
+    run.config = FitConfig(iters=None, seconds=1e9)  # keep the schedule where it is
+    steps = 20
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        start = time.perf_counter()
+        for _ in range(steps):
+            stats = train_step(run, bank, scene.background)
+        train_ms = (time.perf_counter() - start) / steps * 1e3
+    cameras = turntable_path([v.camera for v in scene.split("train")],
+                             VideoOptions(frames=3, width=256, height=256))
+    model.eval()
+    with profile(activities=[ProfilerActivity.CPU]) as render_prof:
+        start = time.perf_counter()
+        for camera in cameras:
+            render_camera(model, camera, display_background(scene.background))
+        frame_ms = (time.perf_counter() - start) / len(cameras) * 1e3
+    return {"row": "profile", "train_step_ms": round(train_ms, 1),
+            "samples_per_ray": round(stats["samples_per_s"] / stats["rays_per_s"], 1),
+            "train_top_ops": _top_ops(prof, steps), "frame_ms": round(frame_ms, 1),
+            "render_top_ops": _top_ops(render_prof, len(cameras)), "probe_psnr": round(probe.psnr(model), 2)}
+
+
+ROWS = ["tiny", "lego100", "lego400", "fewer", "turntable", "gpu", "profile"]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rows", nargs="+", choices=ROWS, default=ROWS[:-1])
+    parser.add_argument("--rows", nargs="+", choices=ROWS, default=ROWS[:5])
     parser.add_argument("--device", default=None)
     parser.add_argument("--seconds", type=float, default=None, help="override every row's budget")
     parser.add_argument("--nerf-seconds", type=float, default=None,

@@ -34,8 +34,12 @@ def plot(rows: list[dict], path: Path) -> Path:
     panels = races(rows)
     if not panels:
         raise SystemExit("no training rows with curves in the input")
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
-    for ax, (title, race) in zip(axes[0], panels):
+    columns = min(3, len(panels))
+    rows_ = -(-len(panels) // columns)
+    fig, axes = plt.subplots(rows_, columns, figsize=(4.4 * columns, 3.4 * rows_), squeeze=False)
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
+    for ax, (title, race) in zip(axes.flat, panels):
         for key, label in MODELS.items():
             if key in race:
                 curve = race[key]["curve"]

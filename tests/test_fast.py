@@ -98,6 +98,7 @@ def test_the_fused_render_path_matches_the_pytorch_path(scene, monkeypatch):
 
 
 @pytest.mark.skipif(not LEGO_TINY.is_file(), reason="shared test data not present")
+@pytest.mark.skipif(not kernels.available("cpu"), reason="the speed is the fused kernels'")
 def test_fast_beats_the_nerf_at_the_same_time_budget(tmp_path):
     from windowshop.scene import load_scene
 
@@ -114,3 +115,34 @@ def test_fast_beats_the_nerf_at_the_same_time_budget(tmp_path):
     # 14.5-15.7 dB (the mean colour alone gives 13.5 dB).
     assert fast["psnr"] >= nerf["psnr"] + 4.0, (fast["psnr"], nerf["psnr"])
     assert fast["psnr"] >= 20.0
+
+
+def test_growing_takes_the_adam_moments_along(scene):
+    config = FastModel.for_scene(FastConfig(), scene)
+    model = FastModel(config, Bounds.of_scene(scene))
+    optimizer = model.make_optimizer()
+    origins, directions = camera_rays(scene.split("train")[0].camera)
+    out = model.render_rays(origins, directions, torch.ones(len(origins), 3))
+    model.loss(out, torch.zeros(len(origins), 3)).backward()
+    optimizer.step()
+    before = optimizer.state[model.density.values]["exp_avg_sq"].sum()
+    model.before_step(1, 1.0)  # the end of the budget: the final lattice
+    state = optimizer.state[model.density.values]
+    assert state["exp_avg_sq"].shape == model.density.values.shape
+    assert state["exp_avg_sq"].sum() > 0.5 * before and state["step"] == 1
+
+
+def test_the_pure_pytorch_path_learns_too(scene, monkeypatch):
+    """What runs on CUDA (and without a C compiler): reference marching and interpolation, dense
+    gradients and dense Adam steps."""
+    monkeypatch.setattr(kernels, "available", lambda device: False)
+    origins, directions = camera_rays(scene.split("test")[0].camera)
+    truth = torch.from_numpy(scene.split("test")[0].image.reshape(-1, 3))
+    errors = []
+    for steps in (1, 40):
+        model = trained(scene, steps=steps)
+        assert not model.density.values.grad.is_sparse
+        with torch.no_grad():
+            rgb = model.render_rays(origins, directions, torch.ones(len(origins), 3)).rgb
+        errors.append(float(torch.mean((rgb - truth) ** 2)))
+    assert errors[1] < 0.5 * errors[0], errors

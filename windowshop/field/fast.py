@@ -13,6 +13,7 @@ kernel that also stops each ray once nothing behind can show (kernels.c render_r
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import replace
 
 import numpy as np
@@ -97,6 +98,7 @@ class FastModel(RadianceModel):
         n_dir = (config.sh_degree + 1) ** 2 if config.sh_degree >= 0 else 0
         self.mlp = nn.Sequential(nn.Linear(config.features + n_dir, config.hidden), nn.ReLU(),
                                  nn.Linear(config.hidden, 3))
+        self._optimizer = None  # a weak reference to the optimizer of make_optimizer
 
     # --- geometry -------------------------------------------------------------------------------
     def _raw_at_alpha(self, alpha: float) -> float:
@@ -208,10 +210,13 @@ class FastModel(RadianceModel):
 
     def make_optimizer(self) -> torch.optim.Optimizer:
         cfg = self.config
-        return GridAdam([
+        # kept (weakly) so that growing grids take their Adam moments along (see grow)
+        optimizer = GridAdam([
             {"params": [self.density.values, self.features.values], "lr": cfg.lr_grid},
             {"params": list(self.mlp.parameters()), "lr": cfg.lr_mlp},
         ])
+        self._optimizer = weakref.ref(optimizer)
+        return optimizer
 
     def lr_factor(self, progress: float) -> float:
         return self.config.lr_final ** min(max(progress, 0.0), 1.0)
@@ -233,9 +238,16 @@ class FastModel(RadianceModel):
 
     @torch.no_grad()
     def grow(self, shape: tuple[int, int, int]) -> None:
-        """Resample both grids to `shape`; every cell of the new lattice starts occupied."""
-        self.density.resize(shape)
-        self.features.resize(shape)
+        """Resample both grids, and their Adam moments, to `shape`; every cell of the new lattice
+        starts occupied. (Fresh moments would make Adam's first steps move every voxel by the
+        full learning rate at once, a jolt that costs several dB at 400x400.)"""
+        optimizer = self._optimizer() if self._optimizer is not None else None
+        for grid in (self.density, self.features):
+            state = optimizer.state.get(grid.values) if optimizer is not None else None
+            if state and state["exp_avg"].shape == grid.values.shape:
+                for key in ("exp_avg", "exp_avg_sq"):
+                    state[key] = grid.resample(state[key], shape)
+            grid.resize(shape)
         self.occupancy.set(torch.ones(tuple(s - 1 for s in shape), dtype=torch.bool,
                                       device=self.occupancy.occupied.device))
 

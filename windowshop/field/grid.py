@@ -196,9 +196,14 @@ class DenseGrid(nn.Module):
     @torch.no_grad()
     def resize(self, shape: tuple[int, int, int]) -> None:
         """Resample to a lattice of `shape` over the same box (trilinear), keeping the Parameter."""
-        volume = self.values.T.reshape(1, -1, *self.shape)
+        shape = tuple(int(s) for s in shape)
+        self._set(shape, self.resample(self.values, shape))
+
+    def resample(self, table: torch.Tensor, shape: tuple[int, int, int]) -> torch.Tensor:
+        """Any per-vertex `table` (X*Y*Z, C) of this lattice resampled to `shape` (trilinear)."""
+        volume = table.detach().T.reshape(1, -1, *self.shape)
         volume = F.interpolate(volume, size=tuple(shape), mode="trilinear", align_corners=True)
-        self._set(tuple(int(s) for s in shape), volume[0].reshape(self.values.shape[1], -1).T)
+        return volume[0].reshape(table.shape[1], -1).T.contiguous()
 
     def _set(self, shape: tuple[int, int, int], values: torch.Tensor) -> None:
         self.shape = shape

@@ -74,11 +74,12 @@ class OccupancyGrid(nn.Module):
 
     @staticmethod
     def _blocks(occupied: torch.Tensor) -> torch.Tensor:
-        volume = occupied[None, None].float()
-        return (F.max_pool3d(volume, kernel_size=kernels.BLOCK, ceil_mode=True)[0, 0] > 0).to(torch.uint8)
+        """(BX, BY, BZ) uint8: 1 where any cell of a block of kernels.BLOCK^3 cells is occupied."""
+        peak = F.max_pool3d(occupied[None, None].float(), kernel_size=kernels.BLOCK, ceil_mode=True)
+        return (peak[0, 0] > 0).to(torch.uint8)
 
     def set(self, occupied: torch.Tensor) -> None:
-        """Replace the occupied cells by `occupied` (OX, OY, OZ) bool (any shape)."""
+        """Replace the occupied cells by `occupied` (OX, OY, OZ) bool, of this or a new size."""
         self.occupied = occupied.to(torch.bool).contiguous()
         self.cells = self.occupied.to(torch.uint8)
         self.blocks = self._blocks(self.occupied)

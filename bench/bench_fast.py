@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from windowshop.config import FitConfig, SceneOptions, VideoOptions
-from windowshop.device import pick_device
+from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
 from windowshop.fit.trainer import Progress, TrainingRun, train_step
@@ -100,8 +100,10 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
     bank = PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
     model.train()
     pending, curve = sorted(m for m in marks if m < seconds), []
+    tuner = ThreadTuner(device)  # as in windowshop fit
     while run.progress.fraction(run.config) < 1.0:
-        train_step(run, bank, scene.background)
+        tuner.before_step()
+        tuner.after_step(train_step(run, bank, scene.background)["seconds"])
         if pending and run.progress.elapsed >= pending[0]:
             while pending and run.progress.elapsed >= pending[0]:
                 pending.pop(0)

@@ -9,6 +9,7 @@ logs loss, PSNR and throughput. Progress is the larger of steps/iters and second
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -20,6 +21,7 @@ import torch
 from tqdm import tqdm
 
 from windowshop.config import FitConfig, SceneOptions
+from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.checkpoint import LOG, load_checkpoint, save_checkpoint, scene_record, write_config
@@ -143,7 +145,7 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     seconds = time.perf_counter() - start
     progress.step += 1
     progress.elapsed += seconds
-    return {"step": progress.step, "loss": float(loss.detach()), "psnr": psnr_of_mse(error),
+    return {"step": progress.step, "loss": float(loss.detach()), "psnr": psnr_of_mse(error), "seconds": seconds,
             "lr": optimizer.param_groups[0]["lr"], "rays_per_s": rays / seconds,
             "samples_per_s": out.num_samples / seconds, "elapsed": progress.elapsed}
 
@@ -155,9 +157,12 @@ def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bo
     total = config.iters if config.iters and not config.seconds else None
     bar = tqdm(total=total, initial=progress.step, disable=not show_progress, unit="step",
                dynamic_ncols=True)
-    with open(run.out_dir / LOG, "a") as log, bar:
+    tuner = ThreadTuner(bank.device)
+    with open(run.out_dir / LOG, "a") as log, bar, contextlib.closing(tuner):
         while progress.fraction(config) < 1.0:
+            tuner.before_step()
             stats = train_step(run, bank, background)
+            tuner.after_step(stats["seconds"])
             bar.update(1)
             bar.set_postfix(loss=f"{stats['loss']:.4f}", psnr=f"{stats['psnr']:.2f}",
                             rays_s=f"{stats['rays_per_s']:.0f}", refresh=False)

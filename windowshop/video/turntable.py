@@ -6,6 +6,7 @@ does the work for any `RadianceModel` and list of cameras.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from collections.abc import Callable
@@ -17,6 +18,7 @@ import torch
 from tqdm import tqdm
 
 from windowshop.config import VideoOptions
+from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
 from windowshop.scene.types import Camera
@@ -71,10 +73,15 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
         raise ValueError("every camera of a video must have the same image size")
     outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame, len(cameras) - 1))
     start = time.perf_counter()
-    with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer:
+    tuner = ThreadTuner(next(model.parameters()).device, period=40, trial=2)  # ffmpeg takes a core too
+    with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
+            contextlib.closing(tuner):
         for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):
+            tuner.before_step()
+            began = time.perf_counter()
             frame = render_camera(model, camera, background=background, chunk=chunk)
             writer.add(frame.rgb, frame.depth, frame.opacity)
+            tuner.after_step(time.perf_counter() - began)
             if on_frame is not None:
                 on_frame(k + 1, len(cameras))
     if outputs.frames_dir is not None:

@@ -20,6 +20,7 @@ Usage: python bench/bench_fast.py [--rows tiny lego100 ...] [--device cpu] [--no
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -100,19 +101,19 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
     bank = PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
     model.train()
     pending, curve = sorted(m for m in marks if m < seconds), []
-    tuner = ThreadTuner(device)  # as in windowshop fit
-    while run.progress.fraction(run.config) < 1.0:
-        tuner.before_step()
-        tuner.after_step(train_step(run, bank, scene.background)["seconds"])
-        if pending and run.progress.elapsed >= pending[0]:
-            while pending and run.progress.elapsed >= pending[0]:
-                pending.pop(0)
-            curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
-                          "psnr": round(probe.psnr(model), 3)})
+    with contextlib.closing(ThreadTuner(device)) as tuner:  # as in windowshop fit
+        while run.progress.fraction(run.config) < 1.0:
+            tuner.before_step()
+            tuner.after_step(train_step(run, bank, scene.background)["seconds"])
+            if pending and run.progress.elapsed >= pending[0]:
+                while pending and run.progress.elapsed >= pending[0]:
+                    pending.pop(0)
+                curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
+                              "psnr": round(probe.psnr(model), 3)})
     curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
                   "psnr": round(probe.psnr(model), 3)})
     return model, {"iterations": run.progress.step, "train_seconds": round(run.progress.elapsed, 2),
-                   "curve": curve}
+                   "steps_by_threads": dict(tuner.used), "curve": curve}
 
 
 def race(scene, seconds: float, args, device: torch.device, nerf: bool = True) -> dict:

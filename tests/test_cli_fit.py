@@ -47,3 +47,17 @@ def test_bad_requests_are_user_errors(tmp_path):
     assert done.returncode == 2 and "checkpoint.pt" in done.stderr and "Traceback" not in done.stderr
     done = windowshop("fit", str(LEGO_TINY), "--model", "nerf", "--preset", "huge", "--out", str(tmp_path))
     assert done.returncode == 2 and "huge" in done.stderr
+
+
+@pytest.mark.skipif(not LEGO_TINY.is_file(), reason="shared test data not present")
+def test_set_reaches_any_model_setting(tmp_path):
+    run = tmp_path / "run"
+    done = windowshop("fit", str(LEGO_TINY), "--set", "voxels=4096", "--set", "hidden=16",
+                      "--views", "5", "--test-views", "1", "--iters", "2", "--out", str(run),
+                      "--device", "cpu")
+    assert done.returncode == 0, done.stderr
+    config = json.loads((run / "config.json").read_text())
+    assert config["model"] == "fast"
+    assert (config["model_config"]["voxels"], config["model_config"]["hidden"]) == (4096, 16)
+    done = windowshop("fit", str(LEGO_TINY), "--set", "voxel_size=2", "--out", str(tmp_path / "b"))
+    assert done.returncode == 2 and "voxel_size" in done.stderr and "voxel_pixels" in done.stderr

@@ -78,7 +78,10 @@ def cmd_fit(args: argparse.Namespace) -> None:
     from windowshop.device import pick_device
     from windowshop.fit.command import fit_command, summary
 
+    from windowshop.study.grids import parse_assignments
+
     model_overrides = {k: getattr(args, k) for k in args.model_flags if getattr(args, k) is not None}
+    model_overrides.update(parse_assignments(args.set))
     fit_overrides = {k: getattr(args, k) for k in ("iters", "seconds", "batch_rays", "seed",
                                                   "log_every", "checkpoint_every", "eval_chunk")}
     metrics = fit_command(args.scene, _scene_options(args), args.model, args.preset, model_overrides,
@@ -255,6 +258,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA when present)")
     _add_scene_flags(p)
     _add_fit_flags(p)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any setting of the model's config, e.g. --set voxel_pixels=2 (fast: "
+                        "windowshop.config.FastConfig)")
     p.set_defaults(func=cmd_fit, model_flags=_add_nerf_flags(p))
 
     p = sub.add_parser("eval", help="measure a run on its held-out views; write eval/*.png")

@@ -1,6 +1,9 @@
-"""Pick the torch device once; only the CLI and the service call this."""
+"""Pick the torch device once (only the CLI and the service call pick_device), and the CPU
+thread count that runs fastest as training or rendering goes (ThreadTuner)."""
 
 from __future__ import annotations
+
+import collections
 
 import torch
 
@@ -13,41 +16,59 @@ def pick_device(name: str | None = None) -> torch.device:
 
 
 class ThreadTuner:
-    """Keeps the CPU thread count that makes steps fastest, measured while training.
+    """Keeps the CPU thread count that makes steps fastest, measured while training or rendering.
 
     OpenMP's threads split each kernel evenly and then wait for the slowest, spinning. When another
     process holds one of the cores, the thread sharing it finishes last and the spinning ones take
     its time slices: on the 2-core machine a fast-model step went from 29 ms to 103 ms, while one
-    thread alone took 38 ms. So every `period` steps the tuner times `trial` steps with all threads
-    and `trial` with half of them, and keeps the faster count until the next trial. On a quiet
-    machine that costs about one percent (8 of 200 steps a third slower); on a shared one it can win back a factor of two or more.
-    Does nothing on CUDA or with a single thread.
+    thread alone took 38 ms. So the tuner times a trial of a few steps with all threads and one
+    with half of them, keeps the faster count for `keep` times as long as the trials took, and
+    tries again. A trial is `trial_steps` steps or `trial_seconds`, whichever ends first, so slow
+    steps (the NeRF's take seconds) are tried one at a time. On a quiet machine that costs about
+    one percent; on a shared one it wins back a factor of two or more. Does nothing on CUDA or
+    with a single thread; the first `warmup` steps (allocations, compilation) are not timed.
     """
 
-    def __init__(self, device: torch.device, period: int = 200, trial: int = 8):
+    def __init__(self, device: torch.device, trial_steps: int = 8, trial_seconds: float = 0.25,
+                 keep: float = 30.0, warmup: int = 2):
         self.full = torch.get_num_threads()
         self.counts = (self.full, max(1, self.full // 2))
         self.enabled = torch.device(device).type == "cpu" and self.full > 1
-        self.period, self.trial = period, trial
-        self.times: dict[int, list[float]] = {}
+        self.trial_steps, self.trial_seconds, self.keep, self.warmup = trial_steps, trial_seconds, keep, warmup
+        self.times: dict[int, list[float]] = {}  # step seconds of the current trials, per count
+        self.trying: int | None = 0  # index into counts on trial, None while keeping the best
+        self.chosen, self.kept, self.budget = self.full, 0.0, 0.0
+        self.used: collections.Counter[int] = collections.Counter()  # steps taken at each count
         self.step = 0
-
-    def _trying(self) -> int | None:
-        """The thread count on trial at the current step, or None outside the trials."""
-        phase = self.step % self.period
-        return self.counts[phase // self.trial] if phase < 2 * self.trial else None
 
     def before_step(self) -> None:
         """Set the thread count for the coming step."""
-        count = self._trying() or self.best()
-        if self.enabled and count != torch.get_num_threads():
+        if not self.enabled:
+            return
+        warm = self.step >= self.warmup
+        count = self.counts[self.trying] if warm and self.trying is not None else self.chosen
+        if count != torch.get_num_threads():
             torch.set_num_threads(count)
 
     def after_step(self, seconds: float) -> None:
         """Record how long the step took."""
-        if self.enabled and (count := self._trying()) is not None:
-            self.times[count] = (self.times.get(count, []) + [seconds])[-self.trial:]
+        count = torch.get_num_threads()
+        self.used[count] += 1
         self.step += 1
+        if not self.enabled or self.step <= self.warmup:
+            return
+        if self.trying is None:
+            self.kept += seconds
+            if self.kept >= self.budget:
+                self.trying, self.times = 0, {}
+            return
+        trial = self.times.setdefault(count, [])
+        trial.append(seconds)
+        if len(trial) >= self.trial_steps or sum(trial) >= self.trial_seconds:
+            self.trying += 1
+            if self.trying == len(self.counts):
+                self.trying, self.chosen, self.kept = None, self.best(), 0.0
+                self.budget = self.keep * sum(map(sum, self.times.values()))
 
     def best(self) -> int:
         """The thread count whose last trial steps had the smaller median time."""

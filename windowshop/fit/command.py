@@ -22,8 +22,8 @@ def build_model_config(model_name: str, preset: str | None, overrides: dict[str,
     names = {f.name for f in dataclasses.fields(cls.config_type)}
     unknown = sorted(set(overrides) - names)
     if unknown:
-        flags = ", ".join("--" + name.replace("_", "-") for name in unknown)
-        raise UserError(f"model {model_name!r} has no setting {flags}")
+        raise UserError(f"model {model_name!r} has no setting {', '.join(unknown)}; its settings: "
+                        f"{', '.join(sorted(names))}")
     try:
         return model_config(model_name, preset, **overrides)
     except ValueError as err:

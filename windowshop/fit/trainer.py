@@ -163,6 +163,7 @@ def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bo
             tuner.before_step()
             stats = train_step(run, bank, background)
             tuner.after_step(stats["seconds"])
+            stats["threads"] = torch.get_num_threads()
             bar.update(1)
             bar.set_postfix(loss=f"{stats['loss']:.4f}", psnr=f"{stats['psnr']:.2f}",
                             rays_s=f"{stats['rays_per_s']:.0f}", refresh=False)

@@ -73,7 +73,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
         raise ValueError("every camera of a video must have the same image size")
     outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame, len(cameras) - 1))
     start = time.perf_counter()
-    tuner = ThreadTuner(next(model.parameters()).device, period=40, trial=2)  # ffmpeg takes a core too
+    tuner = ThreadTuner(next(model.parameters()).device, trial_steps=2)  # ffmpeg takes a core too
     with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
             contextlib.closing(tuner):
         for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):

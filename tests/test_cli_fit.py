@@ -3,11 +3,11 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from shared_data import DATA
 
-LEGO_TINY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "lego_tiny.npz"
+LEGO_TINY = DATA / "lego_tiny.npz"
 SMALL = ["--preset", "tiny", "--depth", "2", "--width", "16", "--n-coarse", "8"]
 
 

@@ -13,8 +13,9 @@ from PIL import Image
 
 from distributed_helpers import REDIS, Cluster
 from windowshop.cli import main
+from shared_data import DATA
 
-LEGO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lego_tiny.npz"
+LEGO = DATA / "lego_tiny.npz"
 pytestmark = [
     pytest.mark.skipif(REDIS is None, reason="redis-server is not installed "
                        "(apt-get install redis-server)"),

@@ -1,7 +1,6 @@
 """The fast model end to end: sizing, growth, a checkpoint round trip, the fused render path against
 the PyTorch one, and a learning race against the NeRF at the same time budget."""
 
-from pathlib import Path
 
 import pytest
 import torch
@@ -13,8 +12,9 @@ from windowshop.fit.trainer import fit
 from windowshop.model import Bounds, model_config
 from windowshop.rays import camera_rays
 from windowshop.scene.synthetic import synthetic_scene
+from shared_data import DATA
 
-LEGO_TINY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "lego_tiny.npz"
+LEGO_TINY = DATA / "lego_tiny.npz"
 
 
 @pytest.fixture(scope="module")

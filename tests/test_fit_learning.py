@@ -1,6 +1,5 @@
 """A small NeRF learns lego_tiny: held-out PSNR well above predicting the mean colour."""
 
-from pathlib import Path
 
 import pytest
 
@@ -8,8 +7,9 @@ from windowshop.config import FitConfig
 from windowshop.fit.evaluate import held_out_views, mean_color_psnr
 from windowshop.fit.trainer import fit
 from windowshop.model import model_config
+from shared_data import DATA
 
-LEGO_TINY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "lego_tiny.npz"
+LEGO_TINY = DATA / "lego_tiny.npz"
 
 
 @pytest.mark.skipif(not LEGO_TINY.is_file(), reason="shared test data not present")

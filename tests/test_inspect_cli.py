@@ -9,8 +9,8 @@ import pytest
 from windowshop.cli import main
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared datasets not present")
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +19,9 @@ from windowshop.video.paths import (
     turntable_path,
     write_camera_path,
 )
+from shared_data import DATA
 
-LEGO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lego"
+LEGO = DATA / "lego"
 
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,8 +10,9 @@ from PIL import Image, ImageFilter
 
 from windowshop.errors import UserError
 from windowshop.photos import ingest
+from shared_data import DATA
 
-KERMIT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kermit"
+KERMIT = DATA / "kermit"
 
 
 def _pattern(width: int = 64, height: int = 48) -> np.ndarray:

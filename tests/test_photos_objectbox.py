@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,8 +11,9 @@ from windowshop.photos import objectbox
 from windowshop.photos.align import pose_errors, rotation_angle, umeyama
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
+from shared_data import DATA
 
-KERMIT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kermit"
+KERMIT = DATA / "kermit"
 
 
 def _ring(n: int = 12, radius: float = 4.0, size: int = 64) -> list[Camera]:

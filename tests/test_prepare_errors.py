@@ -13,8 +13,8 @@ from PIL import Image
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos.prepare import check_out_dir, parse_intrinsics, prepare
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 KERMIT = DATA / "kermit"
 
 

@@ -15,8 +15,9 @@ from PIL import Image, ImageFilter
 from windowshop.cli import main
 from windowshop.rays import project
 from windowshop.scene import load_scene
+from shared_data import DATA
 
-KERMIT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kermit"
+KERMIT = DATA / "kermit"
 
 
 def _hashes(folder: Path) -> dict[str, str]:

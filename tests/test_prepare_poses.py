@@ -16,8 +16,8 @@ from windowshop.photos.align import pose_errors
 from windowshop.photos.prepare import prepare
 from windowshop.rays import project
 from windowshop.scene import read_source
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MAX_ROTATION_DEG = 2.0
 MAX_CENTRE_SHARE = 0.02  # of the capture radius
 

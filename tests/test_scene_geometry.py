@@ -10,8 +10,8 @@ from windowshop.config import SceneOptions
 from windowshop.rays import project
 from windowshop.scene import load_scene, read_source
 from windowshop.scene.distortion import Distortion, distort_pixels
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 BEER_MODEL = DATA / "beer_can" / "sparse" / "0"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="shared datasets not present")
 

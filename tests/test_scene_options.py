@@ -1,6 +1,5 @@
 """Options every reader honours, view selection, and the normalising similarity."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +12,8 @@ from windowshop.scene.normalize import rotation_to_z, up_vector
 from windowshop.scene.selection import assign_splits, evenly_spaced, farthest_directions
 from windowshop.scene.synthetic import BOXES, SPHERES, orbit_cameras, synthetic_scene
 from windowshop.scene.writer import write_transforms
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared datasets not present")
 
 

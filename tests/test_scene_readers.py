@@ -9,8 +9,8 @@ import pytest
 from windowshop.config import SceneOptions
 from windowshop.errors import UserError
 from windowshop.scene import detect_format, load_scene, read_source
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="shared datasets not present")
 SMALL = SceneOptions(max_side=48)
 

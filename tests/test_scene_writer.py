@@ -1,7 +1,6 @@
 """Any Scene written as a nerfstudio transforms.json reads back the same, and maps back."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +9,8 @@ from windowshop.config import SceneOptions
 from windowshop.scene import load_scene
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def _assert_same(a, b, image_tol=0.5 / 255 + 1e-6):

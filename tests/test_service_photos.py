@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import httpx
 import pytest
 
 from service_helpers import FAST_JOB, LiveService
+from shared_data import DATA
 
-KERMIT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kermit"
+KERMIT = DATA / "kermit"
 
 
 @pytest.mark.slow

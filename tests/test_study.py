@@ -16,8 +16,9 @@ from windowshop.errors import UserError
 from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
 from windowshop.study.report import rank_correlation, report_markdown
 from windowshop.study.runner import ResultRow, cpu_model, resolve, study_info
+from shared_data import DATA
 
-LEGO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lego_tiny.npz"
+LEGO = DATA / "lego_tiny.npz"
 needs_lego = pytest.mark.skipif(not LEGO.is_file(), reason="needs ../shared/data/lego_tiny.npz")
 TABLE_1 = [  # images, L, N_c, view dependence (all 2000 iterations), published PSNR (Table 2)
     (100, 6, 64, True, 23.5), (100, 10, 64, True, 23.8), (100, 6, 128, True, 24.2),

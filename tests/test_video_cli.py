@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
@@ -13,8 +12,8 @@ from windowshop.pipeline import VideoSettings, is_posed_scene, make_video
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
 from windowshop.video.encode import probe_video
+from shared_data import DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 TINY = VideoSettings(train_seconds=None, train_steps=4, train_side=32, frames=4, frame_size=32)
 
 

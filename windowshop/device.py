@@ -21,22 +21,25 @@ class ThreadTuner:
     OpenMP's threads split each kernel evenly and then wait for the slowest, spinning. When another
     process holds one of the cores, the thread sharing it finishes last and the spinning ones take
     its time slices: on the 2-core machine a fast-model step went from 29 ms to 103 ms, while one
-    thread alone took 38 ms. So the tuner times a trial of a few steps with all threads and one
-    with half of them, keeps the faster count for `keep` times as long as the trials took, and
-    tries again. A trial is `trial_steps` steps or `trial_seconds`, whichever ends first, so slow
-    steps (the NeRF's take seconds) are tried one at a time. On a quiet machine that costs about
-    one percent; on a shared one it wins back a factor of two or more. Does nothing on CUDA or
-    with a single thread; the first `warmup` steps (allocations, compilation) are not timed.
+    thread alone took 38 ms. So the tuner runs a trial, alternating all threads and half of them
+    step by step (so that a burst of other work hurts both alike), keeps the faster count for
+    `keep` times as long as the trial took, and tries again. Half the threads must be `margin`
+    faster to be chosen. A trial is `trial_steps` steps of each or `trial_seconds` of each,
+    whichever ends first, so slow steps (the NeRF's take seconds) are tried one at a time. On a
+    quiet machine that costs about one percent; on a shared one it wins back a factor of two or
+    more. Does nothing on CUDA or with a single thread; the first `warmup` steps (allocations,
+    compilation) are not timed.
     """
 
     def __init__(self, device: torch.device, trial_steps: int = 8, trial_seconds: float = 0.25,
-                 keep: float = 30.0, warmup: int = 2):
+                 keep: float = 30.0, warmup: int = 2, margin: float = 0.1):
         self.full = torch.get_num_threads()
         self.counts = (self.full, max(1, self.full // 2))
         self.enabled = torch.device(device).type == "cpu" and self.full > 1
-        self.trial_steps, self.trial_seconds, self.keep, self.warmup = trial_steps, trial_seconds, keep, warmup
-        self.times: dict[int, list[float]] = {}  # step seconds of the current trials, per count
-        self.trying: int | None = 0  # index into counts on trial, None while keeping the best
+        self.trial_steps, self.trial_seconds, self.keep = trial_steps, trial_seconds, keep
+        self.warmup, self.margin = warmup, margin
+        self.times: dict[int, list[float]] = {}  # step seconds of the current trial, per count
+        self.trying = True  # in a trial, or keeping the chosen count
         self.chosen, self.kept, self.budget = self.full, 0.0, 0.0
         self.used: collections.Counter[int] = collections.Counter()  # steps taken at each count
         self.step = 0
@@ -45,8 +48,9 @@ class ThreadTuner:
         """Set the thread count for the coming step."""
         if not self.enabled:
             return
-        warm = self.step >= self.warmup
-        count = self.counts[self.trying] if warm and self.trying is not None else self.chosen
+        count = self.chosen
+        if self.trying and self.step >= self.warmup:
+            count = self.counts[sum(map(len, self.times.values())) % len(self.counts)]
         if count != torch.get_num_threads():
             torch.set_num_threads(count)
 
@@ -57,23 +61,23 @@ class ThreadTuner:
         self.step += 1
         if not self.enabled or self.step <= self.warmup:
             return
-        if self.trying is None:
+        if not self.trying:
             self.kept += seconds
             if self.kept >= self.budget:
-                self.trying, self.times = 0, {}
+                self.trying, self.times = True, {}
             return
-        trial = self.times.setdefault(count, [])
-        trial.append(seconds)
-        if len(trial) >= self.trial_steps or sum(trial) >= self.trial_seconds:
-            self.trying += 1
-            if self.trying == len(self.counts):
-                self.trying, self.chosen, self.kept = None, self.best(), 0.0
-                self.budget = self.keep * sum(map(sum, self.times.values()))
+        self.times.setdefault(count, []).append(seconds)
+        trials = [self.times.get(n, []) for n in self.counts]
+        if all(len(t) >= self.trial_steps or (t and sum(t) >= self.trial_seconds) for t in trials):
+            self.trying, self.chosen, self.kept = False, self.best(), 0.0
+            self.budget = self.keep * sum(map(sum, trials))
 
     def best(self) -> int:
-        """The thread count whose last trial steps had the smaller median time."""
-        medians = {n: sorted(t)[len(t) // 2] for n, t in self.times.items()}
-        return min(medians, key=medians.get) if medians else self.full
+        """All threads, unless half of them had a median step time `margin` shorter in the trial."""
+        medians = [sorted(t)[len(t) // 2] for t in (self.times.get(n) for n in self.counts) if t]
+        if len(medians) < 2 or medians[1] >= (1 - self.margin) * medians[0]:
+            return self.full
+        return self.counts[1]
 
     def close(self) -> None:
         """Give the process its full thread count back."""

@@ -179,7 +179,7 @@ def test_fit_command_seconds_replace_the_step_budget(tmp_path, monkeypatch):
                           {"seconds": 0.5, "iters": None, "batch_rays": 16}, str(tmp_path), None, "cpu")
     assert metrics["iterations"] >= 1 and metrics["train_seconds"] >= 0.5
     assert json.loads((tmp_path / "config.json").read_text())["fit_config"]["iters"] is None
-    with pytest.raises(UserError, match="--n-fine"):
+    with pytest.raises(UserError, match="fast.* has no setting n_fine; its settings: .*voxels"):
         build_model_config("fast", None, {"n_fine": 0})
     with pytest.raises(UserError, match="resumed run keeps its model"):
         fit_command(None, SceneOptions(), "nerf", None, {"width": 8}, {}, None, str(tmp_path), "cpu")

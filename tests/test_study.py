@@ -83,7 +83,7 @@ def test_grid_file_rows_product_and_errors(tmp_path):
     fast = tmp_path / "fast.json"
     fast.write_text(json.dumps({"rows": [{"model": "fast", "voxels": 32**3, "iters": 5}]}))
     assert resolve(load_grid(path=fast).combinations[0].settings, "x").model_config.voxels == 32**3
-    for bad, message in [({"frequencies": 3}, "01.*--frequencies"),
+    for bad, message in [({"frequencies": 3}, "01.*no setting frequencies"),
                          ({"voxels": "many"}, "voxels must be an integer"),
                          ({"views": "all"}, "views"), ({"model": "nope"}, "unknown model")]:
         fast.write_text(json.dumps({"rows": [{"model": "fast", "voxels": 32**3, "iters": 5, **bad}]}))

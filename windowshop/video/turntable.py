@@ -64,7 +64,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
     stays bounded at any resolution and length. `on_frame(done, total)` reports progress (the
     web service's jobs); `progress` shows a tqdm bar on stderr.
     """
-    from windowshop.render.frames import render_camera
+    from windowshop.render.frames import model_device, render_camera
 
     if not cameras:
         raise UserError("the camera path is empty: nothing to render")
@@ -73,7 +73,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
         raise ValueError("every camera of a video must have the same image size")
     outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame, len(cameras) - 1))
     start = time.perf_counter()
-    tuner = ThreadTuner(next(model.parameters()).device, trial_steps=2)  # ffmpeg takes a core too
+    tuner = ThreadTuner(model_device(model), trial_steps=2)  # ffmpeg takes a core too
     with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
             contextlib.closing(tuner):
         for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):

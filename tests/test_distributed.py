@@ -69,12 +69,16 @@ def test_cancel_revokes_a_running_job_and_its_worker_takes_the_next(cluster):
     status = cluster.status(job_id)
     assert status["state"] == "cancelled" and status["links"]["video"] is None
     assert httpx.get(f"{cluster.url}/api/jobs/{job_id}/video.mp4", timeout=10).status_code == 409
+    busy = [cluster.submit(cluster.scene) for _ in range(2)]
+    for job in busy:  # both workers at work, so the next job waits in the queue ...
+        cluster.wait_for(job, {"training", "rendering"})
     queued = cluster.submit(cluster.scene)
     cancelled = httpx.post(f"{cluster.url}/api/jobs/{queued}/cancel", timeout=10).json()
     after = cluster.submit(cluster.scene)  # both workers must still be there to run this one
     assert cluster.wait_for(after, {"done", "failed"})["state"] == "done"
     assert cluster.status(queued)["state"] == "cancelled"
-    assert cluster.store.row(queued)["attempts"] == 0  # discarded, never run
+    assert cluster.store.row(queued)["attempts"] == 0  # ... and is discarded, never run
+    assert all(cluster.status(job)["state"] == "done" for job in busy)
 
 
 def test_a_job_on_a_sigkilled_worker_completes_on_the_other(cluster):

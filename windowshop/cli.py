@@ -241,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--iters", type=int, default=None, help="training steps")
     budget.add_argument("--seconds", type=float, default=None,
-                        help="or seconds of training (default: 120)")
+                        help="or seconds of training (default: 30)")
     p.add_argument("--views", type=int, help="training views of the object (default: 40)")
     p.add_argument("--image-size", type=int, help="pixels a side of the training views (default: 64)")
     p.add_argument("--frames", type=int, help="turntable frames (default: 60)")

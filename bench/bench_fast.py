@@ -83,13 +83,9 @@ class Probe:
         return psnr_of_mse(float(torch.mean((rgb.clamp(0, 1) - self.truth) ** 2)))
 
 
-def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[float],
-          device: torch.device):
-    """Train `name` for `seconds` of training time, probing PSNR when it passes each mark.
-
-    The same steps as `windowshop fit` (trainer.train_step); probing is not counted as training.
-    Returns the model and {"iterations", "train_seconds", "curve": [{seconds, step, psnr}]}.
-    """
+def start_run(scene, name: str, config, seconds: float, device: torch.device):
+    """A fresh `name` model on `scene` in training mode, as `windowshop fit` builds it (seed 0, the
+    model's batch size), with a budget of `seconds`: its TrainingRun and the training PixelBank."""
     torch.manual_seed(0)
     config = model_class(name).for_scene(config, scene)
     model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
@@ -98,8 +94,19 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
         group["initial_lr"] = group["lr"]
     run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]),
                       {}, Path(tempfile.gettempdir()), Progress())
-    bank = PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
     model.train()
+    return run, PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
+
+
+def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[float],
+          device: torch.device):
+    """Train `name` for `seconds` of training time, probing PSNR when it passes each mark.
+
+    The same steps as `windowshop fit` (trainer.train_step); probing is not counted as training.
+    Returns the model and {"iterations", "train_seconds", "curve": [{seconds, step, psnr}]}.
+    """
+    run, bank = start_run(scene, name, config, seconds, device)
+    model = run.model
     pending, curve = sorted(m for m in marks if m < seconds), []
     with contextlib.closing(ThreadTuner(device)) as tuner:  # as in windowshop fit
         while run.progress.fraction(run.config) < 1.0:
@@ -210,16 +217,8 @@ def row_profile(args, device):
 
     scene = lego(SceneOptions(downscale=4, test_views=25))
     probe = Probe(scene, device, pixels=256)
-    torch.manual_seed(0)
-    config = model_class("fast").for_scene(model_config("fast"), scene)
-    model = model_class("fast")(config, Bounds.of_scene(scene)).to(device)
-    optimizer = model.make_optimizer()
-    for group in optimizer.param_groups:
-        group["initial_lr"] = group["lr"]
-    run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=10.0), {},
-                      Path(tempfile.gettempdir()), Progress())
-    bank = PixelBank(scene.split("train"), device)
-    model.train()
+    run, bank = start_run(scene, "fast", model_config("fast"), 10.0, device)
+    model = run.model
     while run.progress.fraction(run.config) < 1.0:
         train_step(run, bank, scene.background)
     run.config = FitConfig(iters=None, seconds=1e9)  # keep the schedule where it is

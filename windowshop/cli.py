@@ -77,7 +77,6 @@ def _add_nerf_flags(p: argparse.ArgumentParser) -> list[str]:
 def cmd_fit(args: argparse.Namespace) -> None:
     from windowshop.device import pick_device
     from windowshop.fit.command import fit_command, summary
-
     from windowshop.study.grids import parse_assignments
 
     model_overrides = {k: getattr(args, k) for k in args.model_flags if getattr(args, k) is not None}

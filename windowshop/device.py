@@ -42,14 +42,13 @@ class ThreadTuner:
         self.trying = True  # in a trial, or keeping the chosen count
         self.chosen, self.kept, self.budget = self.full, 0.0, 0.0
         self.used: collections.Counter[int] = collections.Counter()  # steps taken at each count
-        self.step = 0
 
     def before_step(self) -> None:
         """Set the thread count for the coming step."""
         if not self.enabled:
             return
         count = self.chosen
-        if self.trying and self.step >= self.warmup:
+        if self.trying and self.used.total() >= self.warmup:
             count = self.counts[sum(map(len, self.times.values())) % len(self.counts)]
         if count != torch.get_num_threads():
             torch.set_num_threads(count)
@@ -58,8 +57,7 @@ class ThreadTuner:
         """Record how long the step took."""
         count = torch.get_num_threads()
         self.used[count] += 1
-        self.step += 1
-        if not self.enabled or self.step <= self.warmup:
+        if not self.enabled or self.used.total() <= self.warmup:
             return
         if not self.trying:
             self.kept += seconds

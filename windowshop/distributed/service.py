@@ -103,6 +103,7 @@ class ClusterJobs:
 
 
 internal = APIRouter(prefix="/internal/jobs/{job_id}", include_in_schema=False)
+STALE_TRY = "this try is no longer the job's current one"  # 409: another try took the job over
 
 
 def _jobs(request: Request) -> ClusterJobs:
@@ -115,7 +116,7 @@ def _checked(request: Request, job_id: str, key: str | None, token: str | None =
     if row is None or key is None or not secrets.compare_digest(row["worker_key"], key):
         raise _Refused(404, "no such job for this key")
     if token is not None and row["run_token"] != token:
-        raise _Refused(409, "this try is no longer the job's current one")
+        raise _Refused(409, STALE_TRY)
     return row
 
 
@@ -155,7 +156,7 @@ def progress(request: Request, job_id: str, body: dict = Body(...),
     _checked(request, job_id, x_worker_key)
     if not _jobs(request).store.report(job_id, body["token"], body["stage"], body["progress"],
                                        body["stages"], body["eta_seconds"]):
-        raise _Refused(409, "this try is no longer the job's current one")
+        raise _Refused(409, STALE_TRY)
     return {"ok": True}
 
 
@@ -164,7 +165,7 @@ def heartbeat(request: Request, job_id: str, body: dict = Body(...),
               x_worker_key: str | None = Header(None)) -> dict:
     _checked(request, job_id, x_worker_key)
     if not _jobs(request).store.beat(job_id, body["token"]):
-        raise _Refused(409, "this try is no longer the job's current one")
+        raise _Refused(409, STALE_TRY)
     return {"ok": True}
 
 
@@ -175,7 +176,7 @@ def fail(request: Request, job_id: str, body: dict = Body(...),
     jobs = _jobs(request)
     verdict = jobs.store.fail_try(job_id, body["token"], str(body["error"])[:2000])
     if verdict is None:
-        raise _Refused(409, "this try is no longer the job's current one")
+        raise _Refused(409, STALE_TRY)
     if verdict == "retry":
         jobs.dispatch(job_id)
     log.info("job %s: try failed (%s): %s", job_id, verdict, body["error"])
@@ -224,7 +225,7 @@ def _install(jobs: ClusterJobs, job_id: str, token: str, new: Path, dest: Path,
     with jobs.install_lock:  # one upload at a time: the token check and the move go together
         if not jobs.store.owns(job_id, token):
             shutil.rmtree(new, ignore_errors=True)
-            raise _Refused(409, "this try is no longer the job's current one")
+            raise _Refused(409, STALE_TRY)
         replace_folder(new, dest)
         advanced = (jobs.store.finish(job_id, token, frames) if frames is not None
                     else jobs.store.next_phase(job_id, token, TRAIN))

@@ -242,8 +242,9 @@ class FastModel(RadianceModel):
         starts occupied. (Fresh moments would make Adam's first steps move every voxel by the
         full learning rate at once, a jolt that costs several dB at 400x400.)"""
         optimizer = self._optimizer() if self._optimizer is not None else None
+        states = optimizer.state if optimizer is not None else {}
         for grid in (self.density, self.features):
-            state = optimizer.state.get(grid.values) if optimizer is not None else None
+            state = states.get(grid.values)
             if state and state["exp_avg"].shape == grid.values.shape:
                 for key in ("exp_avg", "exp_avg_sq"):
                     state[key] = grid.resample(state[key], shape)

@@ -8,7 +8,8 @@ from windowshop.config import SceneOptions
 from windowshop.rays import project
 from windowshop.scene import load_scene
 from windowshop.scene.loading import target_size
-from windowshop.scene.normalize import rotation_to_z, up_vector
+from windowshop.scene.cameras import up_vector
+from windowshop.scene.normalize import rotation_to_z
 from windowshop.scene.selection import assign_splits, evenly_spaced, farthest_directions
 from windowshop.scene.synthetic import BOXES, SPHERES, orbit_cameras, synthetic_scene
 from windowshop.scene.writer import write_transforms

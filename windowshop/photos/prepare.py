@@ -30,6 +30,7 @@ from windowshop.photos.ingest import (VIDEO_SUFFIXES, Dropped, Inputs, Photo, ch
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
+from windowshop.scene.cameras import up_vector
 from windowshop.scene.nerfstudio import WRITER_KEY
 
 MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
@@ -175,7 +176,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Locate
     """Object box, normalisation and masks for a reconstruction; `pixels` by image file name."""
     posed = output.posed_photos(sfm.reconstruction)
     cameras = [p.camera for p in posed]
-    rotation = normalize.rotation_to_z(normalize.up_vector(np.stack([c.c2w for c in cameras])))
+    rotation = normalize.rotation_to_z(up_vector(np.stack([c.c2w for c in cameras])))
     points = np.array([p.xyz for p in sfm.reconstruction.points3D.values()]).reshape(-1, 3)
     chosen = objectbox.object_points(points, cameras)
     lo, hi = objectbox.object_box(chosen, cameras, rotation)

@@ -1,6 +1,9 @@
-"""Pose conventions: every source's camera axes converted to OpenGL camera-to-world, and checks."""
+"""Camera geometry, the one home for it: pose conventions (every source's camera axes converted to
+OpenGL camera-to-world, and checks), look-at, the point the cameras look at, and a capture's up."""
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 
@@ -65,12 +68,57 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     return c2w
 
 
-def nearest_point_to_axes(c2ws: np.ndarray) -> np.ndarray:
-    """(3,) least-squares point closest to every camera's optical axis; c2ws (N, 4, 4)."""
+def nearest_point_to_axes(c2ws: np.ndarray, prior: np.ndarray | None = None,
+                          weight: float = 1e-6) -> np.ndarray:
+    """(3,) the point nearest, in least squares, to every camera's optical axis; c2ws (N, 4, 4).
+
+    Parallel axes (one camera, or a forward-facing capture) leave the point along them open:
+    with a `prior` (3,), a weak pull of `weight` towards it decides it (moving a converging
+    capture's answer negligibly; the turntable's orbit); without, nearly parallel axes give the
+    mean camera centre one unit ahead of the mean viewing direction (the scene readers).
+    """
     dirs = -c2ws[:, :3, 2]
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     origins = c2ws[:, :3, 3]
     proj = np.eye(3)[None] - dirs[:, :, None] * dirs[:, None, :]  # (N, 3, 3) off-axis projectors
     lhs, rhs = proj.sum(0), np.einsum("nij,nj->i", proj, origins)
-    if np.linalg.cond(lhs) > 1e8:  # parallel axes (one camera, or all facing one way)
+    if prior is not None:
+        pull = weight * len(dirs)
+        return np.linalg.solve(lhs + pull * np.eye(3), rhs + pull * np.asarray(prior))
+    if np.linalg.cond(lhs) > 1e8:
         return origins.mean(0) + dirs.mean(0)
     return np.linalg.solve(lhs, rhs)
+
+
+def up_vector(c2ws: np.ndarray, method: Literal["mean", "level"] = "mean") -> np.ndarray:
+    """(3,) unit "up" of a capture, cameras `c2ws` (N, 4, 4).
+
+    "mean" (normalising a scene): the mean camera up, or the normal of the camera ring when the
+    ups cancel out (e.g. a gantry whose lower views are upside down), signed to agree with the
+    majority of the camera ups.
+    "level" (the turntable's orbit): the direction most perpendicular to every camera's right
+    axis, since photos are taken with the camera level, signed like the mean up; the mean up
+    when the right axes do not spread over a plane (cameras at a single azimuth).
+    """
+    return _level_up(c2ws) if method == "level" else _mean_up(c2ws)
+
+
+def _mean_up(c2ws: np.ndarray) -> np.ndarray:
+    ups = c2ws[:, :3, 1]
+    mean = ups.mean(0)
+    if np.linalg.norm(mean) > 0.5 or len(c2ws) < 3:
+        return mean / max(np.linalg.norm(mean), 1e-12)
+    centres = c2ws[:, :3, 3]
+    normal = np.linalg.svd(centres - centres.mean(0))[2][-1]
+    return normal if np.sum(np.sign(ups @ normal)) >= 0 else -normal
+
+
+def _level_up(c2ws: np.ndarray) -> np.ndarray:
+    mean_up = c2ws[:, :3, 1].mean(0)
+    if np.linalg.norm(mean_up) < 1e-6:
+        mean_up = np.array([0.0, 0.0, 1.0])
+    rights = c2ws[:, :3, 0]
+    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
+    up = eigvecs[:, 0] if eigvals[1] > 0.02 else mean_up
+    up = up if up @ mean_up >= 0 else -up
+    return up / np.linalg.norm(up)

@@ -10,7 +10,7 @@ import numpy as np
 from windowshop.config import SceneOptions
 from windowshop.errors import UserError
 from windowshop.scene import hull, normalize
-from windowshop.scene.cameras import nearest_point_to_axes
+from windowshop.scene.cameras import nearest_point_to_axes, up_vector
 from windowshop.scene.distortion import undistort_image, undistorted_camera
 from windowshop.scene.images import load_mask, load_pixels, parallel_map, resize
 from windowshop.scene.selection import assign_splits
@@ -120,7 +120,7 @@ def _up(source: Source) -> np.ndarray:
     """(3,) unit up of the source world: the published one, else from the cameras."""
     if source.up is not None:
         return np.asarray(source.up, dtype=np.float64) / np.linalg.norm(source.up)
-    return normalize.up_vector(np.stack([f.camera.c2w for f in source.frames]))
+    return up_vector(np.stack([f.camera.c2w for f in source.frames]))
 
 
 def _object_target(source: Source) -> np.ndarray:

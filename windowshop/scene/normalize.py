@@ -15,22 +15,6 @@ BOX_PADDING = 0.05  # estimated boxes grow by this fraction of their size on eac
 MIN_NEAR = 0.02  # normalised units; keeps near positive when a camera sits inside the box
 
 
-def up_vector(c2ws: np.ndarray) -> np.ndarray:
-    """(3,) unit "up" of a capture: the mean camera up, or the normal of the camera ring.
-
-    The ring normal (smallest principal axis of the centres) takes over when the cameras' ups
-    cancel out (e.g. a gantry whose lower views are upside down); it is signed to agree with the
-    majority of the camera ups.
-    """
-    ups = c2ws[:, :3, 1]
-    mean = ups.mean(0)
-    if np.linalg.norm(mean) > 0.5 or len(c2ws) < 3:
-        return mean / max(np.linalg.norm(mean), 1e-12)
-    centres = c2ws[:, :3, 3]
-    normal = np.linalg.svd(centres - centres.mean(0))[2][-1]
-    return normal if np.sum(np.sign(ups @ normal)) >= 0 else -normal
-
-
 def rotation_to_z(up: np.ndarray) -> np.ndarray:
     """(3, 3) the smallest rotation taking unit `up` to +z."""
     z = np.array([0.0, 0.0, 1.0])

@@ -24,7 +24,7 @@ import numpy as np
 
 from windowshop.config import VideoOptions
 from windowshop.errors import UserError
-from windowshop.scene.cameras import look_at
+from windowshop.scene.cameras import look_at, nearest_point_to_axes, up_vector
 from windowshop.scene.types import Camera
 
 MAX_ELEVATION = 85.0  # degrees; looking straight down the up axis leaves "upright" undefined
@@ -57,32 +57,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def nearest_point_to_axes(origins: np.ndarray, directions: np.ndarray, prior: np.ndarray,
-                          weight: float = 1e-6) -> np.ndarray:
-    """The point (3,) nearest, in least squares, to the lines `origins` (N, 3) + t `directions` (N, 3).
-
-    A weak pull towards `prior` (3,) decides the point along the axes when they are (nearly)
-    parallel, as in a forward-facing capture; it moves a converging capture's answer negligibly.
-    """
-    d = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    proj = np.eye(3)[None] - d[:, :, None] * d[:, None, :]  # (N, 3, 3): removes the axis component
-    lhs = proj.sum(0) + weight * len(d) * np.eye(3)
-    rhs = np.einsum("nij,nj->i", proj, origins) + weight * len(d) * prior
-    return np.linalg.solve(lhs, rhs)
-
-
-def fit_up(c2ws: np.ndarray) -> np.ndarray:
-    """Unit up axis (3,) of cameras `c2ws` (N, 4, 4), pointing like their average up vector."""
-    mean_up = c2ws[:, :3, 1].mean(0)
-    if np.linalg.norm(mean_up) < 1e-6:
-        mean_up = np.array([0.0, 0.0, 1.0])
-    rights = c2ws[:, :3, 0]
-    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
-    # The right axes must spread over a plane (cameras at several azimuths) to define its normal.
-    up = eigvecs[:, 0] if eigvals[1] > 0.02 else mean_up
-    return _unit(up if up @ mean_up >= 0 else -up)
-
-
 def vertical_fov(camera: Camera) -> float:
     """Vertical field of view of `camera` in degrees."""
     return math.degrees(2 * math.atan(camera.height / (2 * camera.fy)))
@@ -97,10 +71,9 @@ def fit_orbit(cameras: list[Camera]) -> Orbit:
     if not cameras:
         raise UserError("the run has no training cameras to fit a turntable orbit to")
     c2ws = np.stack([c.c2w for c in cameras]).astype(np.float64)
-    origins, forwards = c2ws[:, :3, 3], -c2ws[:, :3, 2]
-    centre = nearest_point_to_axes(origins, forwards, prior=np.zeros(3))
-    up = fit_up(c2ws)
-    offsets = origins - centre
+    centre = nearest_point_to_axes(c2ws, prior=np.zeros(3))
+    up = up_vector(c2ws, method="level")
+    offsets = c2ws[:, :3, 3] - centre
     dist = np.linalg.norm(offsets, axis=1)
     elev = np.degrees(np.arcsin(np.clip(offsets @ up / np.maximum(dist, 1e-12), -1, 1)))
     fovs = [min(vertical_fov(c), math.degrees(2 * math.atan(c.width / (2 * c.fx)))) for c in cameras]

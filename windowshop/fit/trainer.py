@@ -28,8 +28,7 @@ from windowshop.fit.checkpoint import LOG, load_checkpoint, save_checkpoint, sce
 from windowshop.fit.evaluate import EVAL_DIR, evaluate_views, held_out_views, write_metrics
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
-from windowshop.render.frames import BACKGROUNDS
-from windowshop.scene.types import Scene
+from windowshop.scene.types import BACKGROUNDS, Scene
 
 
 @dataclass

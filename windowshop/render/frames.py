@@ -12,9 +12,7 @@ import torch
 
 from windowshop.model import RadianceModel
 from windowshop.rays import camera_rays
-from windowshop.scene.types import Camera
-
-BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
+from windowshop.scene.types import BACKGROUNDS, Camera
 
 
 @dataclass

@@ -15,9 +15,8 @@ from windowshop.scene.distortion import undistort_image, undistorted_camera
 from windowshop.scene.images import load_mask, load_pixels, parallel_map, resize
 from windowshop.scene.selection import assign_splits
 from windowshop.scene.source import Source, SourceFrame
-from windowshop.scene.types import Scene, View
+from windowshop.scene.types import BACKGROUND_CHOICES, Scene, View, composite_colour
 
-BACKGROUNDS = {"white": 1.0, "black": 0.0, "alpha": 0.0}
 BLACK_LEVEL = 0.05  # brighter pixels of a black-background source count as the object
 
 
@@ -75,7 +74,8 @@ def _load_view(frame: SourceFrame, split: str, options: SceneOptions) -> View:
         stack = undistort_image(stack, stored, camera, frame.distortion)
         rgb, alpha = (stack[..., :3], stack[..., 3]) if alpha is not None else (stack, None)
     if matte:
-        rgb = rgb + (1.0 - alpha[..., None]) * BACKGROUNDS[options.background]
+        colour = np.asarray(composite_colour(options.background), dtype=rgb.dtype)
+        rgb = rgb + (1.0 - alpha[..., None]) * colour
     return View(camera=camera, image=np.ascontiguousarray(rgb, dtype=np.float32), split=split,
                 name=str(frame.image_path), alpha=alpha, stored_camera=frame.camera,
                 distortion=frame.distortion.as_dict() if frame.distortion else None)
@@ -134,7 +134,7 @@ def build_scene(source: Source, options: SceneOptions) -> Scene:
     """The Scene of `source` under `options` (see SceneOptions)."""
     if not source.frames:
         raise UserError(f"{source.path}: the scene has no frames (an empty frame list)")
-    if options.background not in BACKGROUNDS:
+    if options.background not in BACKGROUND_CHOICES:
         raise UserError(f"unknown background {options.background!r}; use white, black or alpha")
     target = _object_target(source)
     centres = np.stack([f.camera.center for f in source.frames])

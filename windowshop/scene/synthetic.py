@@ -14,7 +14,7 @@ import numpy as np
 
 from windowshop.scene.cameras import look_at
 from windowshop.scene.normalize import near_far
-from windowshop.scene.types import Camera, Scene, View
+from windowshop.scene.types import BACKGROUND_CHOICES, Camera, Scene, View, composite_colour
 
 # (centre, radius, albedo, shininess weight)
 SPHERES = [
@@ -32,7 +32,6 @@ CHECKER_DARK = np.array([0.25, 0.25, 0.30])
 LIGHT = np.array([0.4, 0.3, 0.85]) / np.linalg.norm([0.4, 0.3, 0.85])
 AMBIENT, DIFFUSE, SPECULAR, SHININESS = 0.3, 0.7, 0.6, 40.0
 BOUNDS = np.array([[-0.70, -0.70, -0.75], [0.70, 0.70, 0.62]])  # tight box around everything
-BACKGROUNDS = {"white": 1.0, "black": 0.0, "alpha": 0.0}
 
 
 def _hit_spheres(o: np.ndarray, d: np.ndarray, t: np.ndarray, normal: np.ndarray,
@@ -134,9 +133,9 @@ def synthetic_scene(n_train: int = 40, n_test: int = 8, size: int = 64, radius: 
 
     Poses, alpha masks and images are exact; test cameras sit between the training ones.
     """
-    if background not in BACKGROUNDS:
+    if background not in BACKGROUND_CHOICES:
         raise ValueError(f"unknown background {background!r}; use white, black or alpha")
-    colour = (BACKGROUNDS[background],) * 3
+    colour = composite_colour(background)
     views = []
     for split, cams in (("train", orbit_cameras(n_train, size, radius, fov_deg)),
                         ("test", orbit_cameras(n_test, size, radius, fov_deg, offset=0.5))):

@@ -17,6 +17,15 @@ from pathlib import Path
 import numpy as np
 
 SPLITS = ("train", "val", "test")
+# A scene's background colour (RGB in [0, 1]) by name. "alpha" names none: its images are kept
+# composited over black (premultiplied) and the model learns them over random colours.
+BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
+BACKGROUND_CHOICES = (*BACKGROUNDS, "alpha")
+
+
+def composite_colour(background: str) -> tuple[float, float, float]:
+    """(3,) the colour a scene of `background` has its images composited over (black for alpha)."""
+    return BACKGROUNDS["black" if background == "alpha" else background]
 
 
 @dataclass(frozen=True)

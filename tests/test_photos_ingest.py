@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageFilter
 
+from windowshop import media
 from windowshop.errors import UserError
 from windowshop.photos import ingest
 from shared_data import DATA
@@ -41,7 +42,7 @@ def test_resized_to_working_size_with_scale():
     assert photo.name == "kermit000"
 
 
-@pytest.mark.skipif(not ingest.HEIF, reason="pillow-heif is not installed")
+@pytest.mark.skipif(not media.HEIF, reason="pillow-heif is not installed")
 def test_heic_photo_is_read(tmp_path):
     Image.open(KERMIT / "kermit000.jpg").save(tmp_path / "k.heic", quality=90)
     photo = ingest.read_photo(tmp_path / "k.heic", max_side=None)

@@ -16,20 +16,10 @@ import numpy as np
 from PIL import Image, ImageOps, UnidentifiedImageError
 
 from windowshop.errors import UserError
+from windowshop.media import HEIF, HEIF_SUFFIXES, IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_hidden, unzip
 
-IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".webp", ".heic", ".heif", ".tif", ".tiff", ".bmp"}
-VIDEO_SUFFIXES = {".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm"}
 MIN_PHOTOS = 3
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
-
-try:  # HEIC/HEIF (iPhone photos); without pillow-heif they are refused with a clear message
-    from pillow_heif import register_heif_opener
-
-    register_heif_opener()
-    HEIF = True
-except ImportError:
-    HEIF = False
-
 
 @dataclass
 class Photo:
@@ -59,29 +49,18 @@ class Dropped:
     reasons: dict[str, str] = field(default_factory=dict)  # file name -> why
 
 
-def _is_hidden(path: PurePosixPath | Path) -> bool:
-    return any(part.startswith(".") or part == "__MACOSX" for part in path.parts)
+def _is_media(path: PurePosixPath) -> bool:
+    return path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES
 
 
 def _unzip(archive: Path, scratch: Path) -> Path:
-    """Extract the images of `archive` into `scratch/unzipped` (flattened; names made unique)."""
+    """Extract the photos and videos of `archive` into `scratch/unzipped` (flattened; names made
+    unique); the user's own file, so without limits, and with unsafe entries skipped."""
     out = scratch / "unzipped"
     out.mkdir(parents=True, exist_ok=True)
     try:
         with zipfile.ZipFile(archive) as zf:
-            for info in zf.infolist():
-                member = PurePosixPath(info.filename)
-                if info.is_dir() or _is_hidden(member):
-                    continue
-                suffix = member.suffix.lower()
-                if suffix not in IMAGE_SUFFIXES | VIDEO_SUFFIXES:
-                    continue
-                target = out / member.name  # the base name only: nothing can leave `out`
-                n = 2
-                while target.exists():
-                    target = out / f"{member.stem}-{n}{member.suffix}"
-                    n += 1
-                target.write_bytes(zf.read(info))
+            list(unzip(zf, out, str(archive), keep=_is_media, flatten=True, skip_unsafe=True))
     except zipfile.BadZipFile as err:
         raise UserError(f"{archive}: not a readable zip file ({err}); "
                         f"zip the photos again") from err
@@ -105,7 +84,7 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
                         f"(photos: {', '.join(sorted(IMAGE_SUFFIXES))}; "
                         f"videos: {', '.join(sorted(VIDEO_SUFFIXES))})")
     entries = sorted(p for p in path.iterdir()
-                     if p.is_file() and not _is_hidden(p.relative_to(path)))
+                     if p.is_file() and not is_hidden(p.relative_to(path)))
     photos = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
     videos = [p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES]
     if not photos and len(videos) == 1:
@@ -123,7 +102,7 @@ def _camera_key(image: Image.Image, size: tuple[int, int]) -> tuple:
 
 def read_photo(path: Path, max_side: int | None) -> Photo:
     """Decode, turn upright (EXIF orientation) and shrink one photo; UserError if it is unusable."""
-    if path.suffix.lower() in {".heic", ".heif"} and not HEIF:
+    if path.suffix.lower() in HEIF_SUFFIXES and not HEIF:
         raise UserError(f"{path}: HEIC/HEIF photos need the pillow-heif package "
                         f"(pip install pillow-heif), or export the photos as JPEG")
     try:

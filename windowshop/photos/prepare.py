@@ -23,10 +23,10 @@ import numpy as np
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
+from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import objectbox, output, report
 from windowshop.photos.frames import sample_frames
-from windowshop.photos.ingest import (VIDEO_SUFFIXES, Dropped, Inputs, Photo, check_enough,
-                                      gather_inputs, read_photos)
+from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize

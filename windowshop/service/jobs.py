@@ -12,9 +12,9 @@ import threading
 import time
 from pathlib import Path
 
+from windowshop.media import VIDEO_SUFFIXES
 from windowshop.service.db import RUNNING, JobStore
 from windowshop.service.settings import ServiceSettings
-from windowshop.service.uploads import VIDEO_SUFFIXES
 from windowshop.service.worker import job_dir
 
 # The pipeline's stage names, and the job states they put the job in.

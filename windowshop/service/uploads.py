@@ -10,30 +10,22 @@ from __future__ import annotations
 
 import re
 import shutil
-import stat
 import warnings
 import zipfile
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import imageio_ffmpeg
 from PIL import Image, UnidentifiedImageError
 
+from windowshop import media
+from windowshop.media import HEIF, Refused, ZipLimits
 from windowshop.service.settings import ServiceSettings
 
-try:  # HEIC photos from phones, when the optional decoder is installed
-    from pillow_heif import register_heif_opener
-
-    register_heif_opener()
-    HEIF = True
-except ImportError:
-    HEIF = False
-
 IMAGE_FORMATS = {"JPEG": ".jpg", "PNG": ".png", "WEBP": ".webp", "HEIF": ".heic"}
-VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv")  # what video_suffix names a video
 SCENE_DATA_SUFFIXES = {".json", ".txt", ".npy", ".npz", ".bin", ".ply", ".csv"}
 _HEIF_BRANDS = {b"heic", b"heix", b"hevc", b"heim", b"heis", b"mif1", b"msf1", b"avif"}
-_COPY_CHUNK = 1 << 20
+_TOO_LARGE = {"file_too_large", "too_many_entries", "zip_too_large"}  # media's codes sent as 413
 
 
 class UploadRefused(Exception):
@@ -42,6 +34,11 @@ class UploadRefused(Exception):
     def __init__(self, status: int, code: str, message: str):
         super().__init__(message)
         self.status, self.code, self.message = status, code, message
+
+    @classmethod
+    def of(cls, err: Refused) -> "UploadRefused":
+        """`media`'s refusal with its HTTP status: 413 for sizes and counts, else 400."""
+        return cls(413 if err.code in _TOO_LARGE else 400, err.code, err.message)
 
 
 @dataclass(frozen=True)
@@ -86,15 +83,10 @@ def safe_stem(name: str, fallback: str) -> str:
 
 def copy_limited(src, dest: Path, limit: int, what: str) -> int:
     """Copy the file object `src` into `dest`, refusing (413) past `limit` bytes; returns the size."""
-    size = 0
-    with open(dest, "wb") as out:
-        while chunk := src.read(_COPY_CHUNK):
-            size += len(chunk)
-            if size > limit:
-                raise UploadRefused(413, "file_too_large",
-                                    f"{what} is larger than the limit of {limit // 2**20} MiB")
-            out.write(chunk)
-    return size
+    try:
+        return media.copy_limited(src, dest, limit, what)
+    except Refused as err:
+        raise UploadRefused.of(err) from None
 
 
 def check_image(path: Path, what: str, settings: ServiceSettings) -> str:
@@ -206,25 +198,20 @@ def _take_photos(parts: list[tuple[Path, str]], inputs: Path,
     return CheckedUpload("photos", f"{len(parts)} photos", inputs)
 
 
-def _entry_path(name: str) -> PurePosixPath | None:
-    """The entry's relative path, or None when it would land outside the folder (zip slip)."""
-    name = name.replace("\\", "/")
-    if name.startswith("/") or re.match(r"^[A-Za-z]:", name):
-        return None
-    path = PurePosixPath(name)
-    return None if ".." in path.parts else path
-
-
 def unpack_zip(path: Path, name: str, inputs: Path, settings: ServiceSettings) -> CheckedUpload:
     """Check every entry of the zip at `path`, then unpack it into `inputs`."""
     try:
         archive = zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError) as err:
         raise UploadRefused(415, "broken_zip", f"{name!r} is not a readable zip ({err})") from None
+    limits = ZipLimits(entries=settings.max_zip_entries, unpacked_bytes=settings.max_unpacked_bytes,
+                       file_bytes=settings.max_file_bytes)
     with archive:
-        entries = [e for e in archive.infolist() if not _ignored(e.filename)]
-        _check_zip_index(entries, name, settings)
-        images = sum(_unpack_entry(archive, e, inputs, name, settings) for e in entries)
+        try:
+            images = sum(_check_entry(dest, f"{name!r}: entry {entry!r}", settings)
+                         for entry, dest in media.unzip(archive, inputs, name, limits))
+        except Refused as err:
+            raise UploadRefused.of(err) from None
     path.unlink()
     if images == 0:
         raise UploadRefused(400, "no_images", f"{name!r} holds no photos (JPEG, PNG or WebP)")
@@ -236,49 +223,14 @@ def unpack_zip(path: Path, name: str, inputs: Path, settings: ServiceSettings) -
     return CheckedUpload("zip", f"a zip of {what} with {images} images", root)
 
 
-def _ignored(name: str) -> bool:
-    """Entries archivers add on their own (macOS resource forks, hidden files)."""
-    parts = name.replace("\\", "/").split("/")
-    return parts[0] == "__MACOSX" or any(p.startswith(".") and p not in (".", "..") for p in parts)
-
-
-def _check_zip_index(entries: list[zipfile.ZipInfo], name: str, settings: ServiceSettings) -> None:
-    """Refuse from the index alone: too many entries, too many bytes, escaping paths, links."""
-    if len(entries) > settings.max_zip_entries:
-        raise UploadRefused(413, "too_many_entries", f"{name!r} has {len(entries)} entries; the "
-                            f"limit is {settings.max_zip_entries}")
-    unpacked = sum(e.file_size for e in entries)
-    if unpacked > settings.max_unpacked_bytes:
-        raise UploadRefused(413, "zip_too_large", f"{name!r} unpacks to {unpacked // 2**20} MiB; "
-                            f"the limit is {settings.max_unpacked_bytes // 2**20} MiB")
-    for entry in entries:
-        if _entry_path(entry.filename) is None:
-            raise UploadRefused(400, "zip_slip", f"{name!r}: entry {entry.filename!r} would be "
-                                "written outside the zip's folder; zip the scene folder itself")
-        if stat.S_ISLNK(entry.external_attr >> 16):
-            raise UploadRefused(400, "zip_link", f"{name!r}: entry {entry.filename!r} is a "
-                                "symbolic link; zip the files themselves")
-
-
-def _unpack_entry(archive: zipfile.ZipFile, entry: zipfile.ZipInfo, inputs: Path, name: str,
-                  settings: ServiceSettings) -> int:
-    """Unpack one entry (checking it by content); returns 1 for an image, else 0."""
-    if entry.is_dir():
-        return 0
-    dest = inputs / _entry_path(entry.filename)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    what = f"{name!r}: entry {entry.filename!r}"
-    try:
-        with archive.open(entry) as src:  # reads at most the declared size, and checks the CRC
-            copy_limited(src, dest, settings.max_file_bytes, what)
-    except (zipfile.BadZipFile, OSError, EOFError) as err:
-        raise UploadRefused(400, "broken_zip", f"{what} cannot be unpacked ({err})") from None
-    with open(dest, "rb") as f:
+def _check_entry(path: Path, what: str, settings: ServiceSettings) -> int:
+    """Check one unpacked entry by its content; returns 1 for an image, 0 for a scene file."""
+    with open(path, "rb") as f:
         kind = sniff(f.read(16))
     if kind == "image":
-        check_image(dest, what, settings)
+        check_image(path, what, settings)
         return 1
-    if kind in (None, "zip") and dest.suffix.lower() in SCENE_DATA_SUFFIXES:  # .npz is a zip
+    if kind in (None, "zip") and path.suffix.lower() in SCENE_DATA_SUFFIXES:  # .npz is a zip
         return 0
     raise UploadRefused(415, "unsupported_type", f"{what} is not a photo nor a scene file "
                         f"({', '.join(sorted(SCENE_DATA_SUFFIXES))})")

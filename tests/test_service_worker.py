@@ -16,8 +16,8 @@ import pytest
 from windowshop.errors import UserError
 from windowshop.service.db import MAX_ATTEMPTS, JobStore
 from windowshop.service.jobs import ProgressReporter
-from windowshop.service.settings import ServiceSettings
-from windowshop.service.worker import Worker, job_dir
+from windowshop.service.settings import ServiceSettings, job_dir
+from windowshop.service.worker import Worker
 
 
 def _mark(settings: ServiceSettings, job_id: str, what: str) -> None:

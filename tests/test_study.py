@@ -15,7 +15,8 @@ from windowshop.config import FitConfig, NerfConfig, SceneOptions
 from windowshop.errors import UserError
 from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
 from windowshop.study.report import rank_correlation, report_markdown
-from windowshop.study.runner import ResultRow, cpu_model, resolve, study_info
+from windowshop.study.records import ResultRow
+from windowshop.study.runner import cpu_model, resolve, study_info
 from shared_data import DATA
 
 LEGO = DATA / "lego_tiny.npz"

@@ -27,8 +27,7 @@ from windowshop.distributed.celery_app import ClusterSettings, configure, gpu_wo
 from windowshop.distributed.store import PREPARE, TRAIN, ClusterStore, default_db_url
 from windowshop.distributed.transfer import replace_folder, unzip_to, zip_folder
 from windowshop.service.db import Job
-from windowshop.service.settings import ServiceSettings
-from windowshop.service.worker import job_dir
+from windowshop.service.settings import ServiceSettings, job_dir
 
 log = logging.getLogger("windowshop.service")
 # The service's settings a worker needs to run a job the way this service would.

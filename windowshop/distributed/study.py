@@ -61,7 +61,8 @@ def study_run(self, combo: dict, scene_zip: str, scene_name: str, scene_source: 
     from windowshop.device import pick_device
     from windowshop.distributed.tasks import _DEVICE
     from windowshop.study.grids import Combination
-    from windowshop.study.runner import TRUTH, run_combination
+    from windowshop.study.records import TRUTH
+    from windowshop.study.runner import run_combination
 
     worker = self.request.hostname or socket.gethostname()
     combination = Combination(**combo)
@@ -108,7 +109,7 @@ def _queue(celery) -> str:
 
 def _install(out: Path, combo, result: dict) -> None:
     """Unpack a worker's run folder into OUT/runs/<folder> (and the truth view, once)."""
-    from windowshop.study.runner import ROW, RUNS, TRUTH
+    from windowshop.study.records import ROW, RUNS, TRUTH
 
     run_dir = out / RUNS / combo.folder
     with tempfile.TemporaryDirectory(dir=out) as tmp:
@@ -126,7 +127,8 @@ def _install(out: Path, combo, result: dict) -> None:
 def _gather(pending: dict, out: Path, skipped: int, total: int,
             poll: float = 0.5) -> tuple[dict, list[str]]:
     """Wait for every task of `pending` ({AsyncResult: combo}); (rows by index, errors)."""
-    from windowshop.study.runner import ResultRow, row_summary
+    from windowshop.study.records import ResultRow
+    from windowshop.study.runner import row_summary
 
     rows, errors = {}, []
     while pending:
@@ -145,7 +147,7 @@ def _gather(pending: dict, out: Path, skipped: int, total: int,
 
 
 def _write_study_json(out: Path, grid, info) -> None:
-    from windowshop.study.runner import STUDY
+    from windowshop.study.records import STUDY
 
     out.mkdir(parents=True, exist_ok=True)  # as run_study writes it
     (out / STUDY).write_text(json.dumps({"info": dataclasses.asdict(info),

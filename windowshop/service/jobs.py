@@ -14,8 +14,7 @@ from pathlib import Path
 
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.service.db import RUNNING, JobStore
-from windowshop.service.settings import ServiceSettings
-from windowshop.service.worker import job_dir
+from windowshop.service.settings import ServiceSettings, job_dir
 
 # The pipeline's stage names, and the job states they put the job in.
 STAGE_STATES = {"prepare": "preparing", "fit": "training", "train": "training", "render": "rendering"}

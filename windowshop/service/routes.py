@@ -20,9 +20,8 @@ from starlette.formparsers import MultiPartException
 
 from windowshop.service.db import DONE, FINISHED, QUEUED, Job, JobStore
 from windowshop.service.jobs import FRAME_NAME
-from windowshop.service.settings import ServiceSettings
+from windowshop.service.settings import ServiceSettings, job_dir
 from windowshop.service.uploads import UploadRefused, check_upload, copy_limited
-from windowshop.service.worker import job_dir
 
 router = APIRouter(prefix="/api")
 _ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")

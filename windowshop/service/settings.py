@@ -53,3 +53,8 @@ class ServiceSettings(BaseSettings):
     @property
     def jobs_dir(self) -> Path:
         return self.data_dir / "jobs"
+
+
+def job_dir(settings: ServiceSettings, job_id: str) -> Path:
+    """The folder of one job: its input, work and result."""
+    return settings.jobs_dir / job_id

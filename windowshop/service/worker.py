@@ -20,22 +20,18 @@ import threading
 import time
 import traceback
 from multiprocessing.process import BaseProcess
-from pathlib import Path
 from typing import Callable
 
 from windowshop.errors import UserError
 from windowshop.service.db import DONE, FAILED, JobStore
-from windowshop.service.settings import ServiceSettings
+from windowshop.service.jobs import run_job
+from windowshop.service.settings import ServiceSettings, job_dir
 
 log = logging.getLogger("windowshop.service")
 
 # A job function runs one job to its end and returns the number of per-frame images it made:
 # (settings, job id, run token) -> frames. It raises UserError for problems the user can fix.
 JobFunction = Callable[[ServiceSettings, str, str], int]
-
-
-def job_dir(settings: ServiceSettings, job_id: str) -> Path:
-    return settings.jobs_dir / job_id
 
 
 class Worker:
@@ -122,8 +118,6 @@ def run_worker(settings: ServiceSettings, parent_pid: int, job_fn: JobFunction |
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the web process, which stops us
     signal.signal(signal.SIGTERM, lambda *_: stopping.set())
     if job_fn is None:
-        from windowshop.service.jobs import run_job
-
         job_fn = run_job
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     with open(settings.data_dir / "worker.lock", "w") as lock:

@@ -9,7 +9,8 @@ import torch
 
 from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
 from windowshop.study.report import REPORT
-from windowshop.study.runner import ResultRow, run_study
+from windowshop.study.records import ResultRow
+from windowshop.study.runner import run_study
 
 
 def command_line(preset: str | None, grid_file: str | None, scene: str, out: str,

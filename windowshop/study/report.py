@@ -13,7 +13,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from windowshop.study.grids import Grid
-from windowshop.study.runner import TRUTH, VIEW, ResultRow, StudyInfo
+from windowshop.study.records import TRUTH, VIEW, ResultRow, StudyInfo
 
 RESULTS = "results.csv"
 REPORT = "REPORT.md"

@@ -19,7 +19,7 @@ import os
 import platform
 import types
 import typing
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -29,13 +29,10 @@ from PIL import Image
 from windowshop.config import FitConfig, SceneOptions
 from windowshop.errors import UserError
 from windowshop.study.grids import Combination, Grid
+from windowshop.study.records import ROW, RUNS, STUDY, TRUTH, VIEW, ResultRow, StudyInfo
+from windowshop.study.report import write_report
 
 DEFAULT_MODEL = "nerf"  # as `windowshop fit` when a grid names no model
-RUNS = "runs"
-STUDY = "study.json"
-ROW = "study_row.json"
-VIEW = "study_view.png"
-TRUTH = "truth_view.png"
 
 
 @dataclass(frozen=True)
@@ -53,44 +50,6 @@ class RunSettings:
         return {"model": self.model, "preset": self.preset,
                 **dataclasses.asdict(self.scene_options), **dataclasses.asdict(self.fit_config),
                 **dataclasses.asdict(self.model_config)}
-
-
-@dataclass
-class ResultRow:
-    """One line of results.csv: a combination, what it reached and how long it took."""
-
-    index: int
-    name: str
-    folder: str  # relative to the study folder
-    settings: dict[str, Any]  # `RunSettings.effective()`, with `views` the training views used
-    train_views: int
-    test_views: int
-    iterations: int
-    train_seconds: float
-    seconds_per_iter: float
-    psnr: float | None
-    ssim: float | None
-    eval_seconds: float
-    published: dict[str, float] = field(default_factory=dict)
-    status: str = "trained"  # "trained", "resumed" or "skipped" (finished by an earlier call)
-    machine: str = ""  # `describe_machine` of the call that finished the run
-    load: float | None = None  # the machine's load average when that call started the run
-    finished: str = ""  # when the row was written (ISO time)
-
-
-@dataclass(frozen=True)
-class StudyInfo:
-    """What a study's numbers depend on besides the grid: where, with what budget, when."""
-
-    grid: str
-    scene: str
-    budget: str
-    overrides: dict[str, Any]
-    machine: str
-    device: str
-    torch: str
-    started: str
-    command: str = ""
 
 
 def _check_value(key: str, value: Any, hint: Any, where: str) -> Any:
@@ -342,8 +301,6 @@ def run_study(grid: Grid, scene_path: str | Path, out_dir: str | Path, device: t
 
     All combinations are checked before any is trained, so a typo fails at once.
     """
-    from windowshop.study.report import write_report
-
     for combo in grid.combinations:
         resolve(combo.settings, combo.folder)
     out_dir = Path(out_dir)

@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 from PIL import Image
 
 from windowshop.service.app import create_app
-from windowshop.service.db import JobStore
+from windowshop.service.db import SQLiteJobStore
 from windowshop.service.settings import ServiceSettings
 
 
@@ -287,7 +287,7 @@ def test_cancel_a_queued_job(client):
     assert r.status_code == 200 and r.json()["state"] == "cancelled"
     assert client.get(f"/api/jobs/{job_id}").json()["state"] == "cancelled"
     refused(client.post(f"/api/jobs/{job_id}/cancel"), 409, "finished")
-    assert JobStore(client.settings.db_path).claim_next("token") is None  # the worker won't run it
+    assert SQLiteJobStore(client.settings.db_path).claim_next("token") is None  # the worker won't run it
 
 
 def test_delete_removes_the_job_and_its_files(client):

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from windowshop.errors import UserError
-from windowshop.service.db import MAX_ATTEMPTS, JobStore
+from windowshop.service.db import MAX_ATTEMPTS, SQLiteJobStore
 from windowshop.service.jobs import ProgressReporter
 from windowshop.service.settings import ServiceSettings, job_dir
 from windowshop.service.worker import Worker
@@ -29,7 +29,7 @@ def _mark(settings: ServiceSettings, job_id: str, what: str) -> None:
 def quick_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
     _mark(settings, job_id, "start")
     time.sleep(0.6)
-    reporter = ProgressReporter(JobStore(settings.db_path), job_id, run_token)
+    reporter = ProgressReporter(SQLiteJobStore(settings.db_path), job_id, run_token)
     reporter("render", 1.0)
     _mark(settings, job_id, "end")
     return 7
@@ -37,7 +37,7 @@ def quick_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
 
 def endless_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
     (job_dir(settings, job_id) / "work").mkdir(parents=True, exist_ok=True)
-    reporter = ProgressReporter(JobStore(settings.db_path), job_id, run_token, min_interval=0)
+    reporter = ProgressReporter(SQLiteJobStore(settings.db_path), job_id, run_token, min_interval=0)
     reporter("fit", 0.25)
     _mark(settings, job_id, "start")
     time.sleep(600)
@@ -167,7 +167,7 @@ def test_an_orderly_stop_puts_running_jobs_back_without_counting_a_try(make_work
 
 def test_start_requeues_interrupted_jobs_and_gives_up_after_a_few(tmp_path):
     settings = ServiceSettings(data_dir=tmp_path)
-    store = JobStore(settings.db_path)
+    store = SQLiteJobStore(settings.db_path)
     for job_id in ("a" * 22, "b" * 22, "c" * 22):
         store.create(job_id, "photos", "3 photos")
     old = store.claim_next("old-token")  # "a": running when its worker died
@@ -194,7 +194,7 @@ class Clock:
 
 
 def test_progress_reporter_states_and_time_left(tmp_path):
-    store = JobStore(tmp_path / "jobs.sqlite3")
+    store = SQLiteJobStore(tmp_path / "jobs.sqlite3")
     store.create("j" * 22, "photos", "12 photos")
     store.claim_next("t")
     clock = Clock()
@@ -217,7 +217,7 @@ def test_progress_reporter_states_and_time_left(tmp_path):
 
 
 def test_progress_of_a_posed_scene_counts_only_the_stages_it_runs(tmp_path):
-    store = JobStore(tmp_path / "jobs.sqlite3")
+    store = SQLiteJobStore(tmp_path / "jobs.sqlite3")
     store.create("p" * 22, "zip", "a posed scene")
     store.claim_next("t")
     clock = Clock()

@@ -26,8 +26,8 @@ from starlette.background import BackgroundTask
 from windowshop.distributed.celery_app import ClusterSettings, configure, gpu_workers
 from windowshop.distributed.store import PREPARE, TRAIN, ClusterStore, default_db_url
 from windowshop.distributed.transfer import replace_folder, unzip_to, zip_folder
-from windowshop.service.db import Job
 from windowshop.service.settings import ServiceSettings, job_dir
+from windowshop.service.store import Job, JobQueue
 
 log = logging.getLogger("windowshop.service")
 # The service's settings a worker needs to run a job the way this service would.
@@ -35,7 +35,7 @@ KNOBS = ("model", "preset", "train_seconds", "train_steps", "train_side", "frame
          "frame_size", "device")
 
 
-class ClusterJobs:
+class ClusterJobs(JobQueue):
     """What the job routes ask of `app.state.store`, over the shared store and the broker."""
 
     def __init__(self, settings: ServiceSettings, cluster: ClusterSettings):

@@ -18,9 +18,9 @@ import time
 
 import sqlalchemy as sa
 
-from windowshop.service.db import CANCELLED, DONE, FAILED, FINISHED, QUEUED, RUNNING, Job
+from windowshop.service.store import (CANCELLED, DONE, FAILED, FINISHED, MAX_ATTEMPTS, QUEUED, RUNNING,
+                                      Job, JobStore)
 
-MAX_ATTEMPTS = 3
 PREPARE, TRAIN = "prepare", "train"
 PHASE_STATE = {PREPARE: "preparing", TRAIN: "training"}
 
@@ -66,7 +66,7 @@ def make_engine(url: str) -> sa.Engine:
     return sa.create_engine(url, pool_pre_ping=True)
 
 
-class ClusterStore:
+class ClusterStore(JobStore):
     """The jobs table at `url`, created on first use."""
 
     def __init__(self, url: str):

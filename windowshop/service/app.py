@@ -16,7 +16,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from windowshop.service import routes
-from windowshop.service.db import JobStore
+from windowshop.service.db import SQLiteJobStore
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.worker import JobFunction, run_worker
 
@@ -44,7 +44,7 @@ def create_app(settings: ServiceSettings | None = None, start_worker: bool = Tru
 
     app = FastAPI(title="windowshop", lifespan=lifespan, version="0.1.0",
                   description="Photos of an object in, a 360° turntable video out.")
-    app.state.settings, app.state.store, app.state.worker = settings, JobStore(settings.db_path), None
+    app.state.settings, app.state.store, app.state.worker = settings, SQLiteJobStore(settings.db_path), None
     app.include_router(routes.router)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 

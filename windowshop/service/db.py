@@ -12,16 +12,11 @@ import json
 import sqlite3
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
-QUEUED = "queued"
-RUNNING = ("preparing", "training", "rendering")
-DONE, FAILED, CANCELLED = "done", "failed", "cancelled"
-FINISHED = (DONE, FAILED, CANCELLED)
-STATES = (QUEUED, *RUNNING, *FINISHED)
-MAX_ATTEMPTS = 3  # a job interrupted this often (it may be what kills the worker) fails instead
+from windowshop.service.store import (CANCELLED, FAILED, MAX_ATTEMPTS, QUEUED, RUNNING, Job,
+                                      JobStore)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -45,28 +40,7 @@ CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_at);
 """
 
 
-@dataclass
-class Job:
-    """One row of the store."""
-
-    id: str
-    state: str
-    input_kind: str  # "photos" | "video" | "zip"
-    input_summary: str
-    created_at: float
-    stage: str | None = None  # the running or last stage: "preparing" | "training" | "rendering"
-    progress: float = 0.0  # of `stage`, in [0, 1]
-    stages: dict[str, float] = field(default_factory=dict)  # progress of every stage seen so far
-    eta_seconds: float | None = None
-    error: str | None = None
-    started_at: float | None = None
-    finished_at: float | None = None
-    run_token: str | None = None
-    attempts: int = 0
-    frames: int = 0  # per-frame images available once done
-
-
-class JobStore:
+class SQLiteJobStore(JobStore):
     """Jobs in `path` (an SQLite file, created with its table on first use)."""
 
     def __init__(self, path: Path):

@@ -13,8 +13,9 @@ import time
 from pathlib import Path
 
 from windowshop.media import VIDEO_SUFFIXES
-from windowshop.service.db import RUNNING, JobStore
+from windowshop.service.db import SQLiteJobStore
 from windowshop.service.settings import ServiceSettings, job_dir
+from windowshop.service.store import RUNNING, ProgressStore
 
 # The pipeline's stage names, and the job states they put the job in.
 STAGE_STATES = {"prepare": "preparing", "fit": "training", "train": "training", "render": "rendering"}
@@ -32,7 +33,7 @@ class ProgressReporter:
     `min_interval` seconds, except stage changes and stage ends.
     """
 
-    def __init__(self, store: JobStore, job_id: str, run_token: str, clock=time.monotonic,
+    def __init__(self, store: ProgressStore, job_id: str, run_token: str, clock=time.monotonic,
                  min_interval: float = 0.5):
         self.store, self.job_id, self.run_token = store, job_id, run_token
         self.clock, self.min_interval = clock, min_interval
@@ -113,7 +114,7 @@ def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
 
     folder = job_dir(settings, job_id)
     work, result = reset_folders(folder)
-    report = ProgressReporter(JobStore(settings.db_path), job_id, run_token)
+    report = ProgressReporter(SQLiteJobStore(settings.db_path), job_id, run_token)
     make_video(pipeline_input(folder), result / "video.mp4", video_settings(settings), work_dir=work,
                device=pick_device(settings.device), poster=str(result / "poster.jpg"),
                frames_dir=result / "frames", on_stage=report, show=False)

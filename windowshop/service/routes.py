@@ -18,9 +18,9 @@ from pydantic import BaseModel
 from starlette.exceptions import HTTPException
 from starlette.formparsers import MultiPartException
 
-from windowshop.service.db import DONE, FINISHED, QUEUED, Job, JobStore
 from windowshop.service.jobs import FRAME_NAME
 from windowshop.service.settings import ServiceSettings, job_dir
+from windowshop.service.store import DONE, FINISHED, QUEUED, Job, JobQueue
 from windowshop.service.uploads import UploadRefused, check_upload, copy_limited
 
 router = APIRouter(prefix="/api")
@@ -74,7 +74,7 @@ class ApiRefusal(BaseModel):
 _REFUSALS = {code: {"model": ApiRefusal} for code in (400, 404, 409, 413, 415, 503)}
 
 
-def _store(request: Request) -> JobStore:
+def _store(request: Request) -> JobQueue:
     return request.app.state.store
 
 

@@ -23,9 +23,10 @@ from multiprocessing.process import BaseProcess
 from typing import Callable
 
 from windowshop.errors import UserError
-from windowshop.service.db import DONE, FAILED, JobStore
+from windowshop.service.db import SQLiteJobStore
 from windowshop.service.jobs import run_job
 from windowshop.service.settings import ServiceSettings, job_dir
+from windowshop.service.store import DONE, FAILED
 
 log = logging.getLogger("windowshop.service")
 
@@ -39,7 +40,7 @@ class Worker:
 
     def __init__(self, settings: ServiceSettings, job_fn: JobFunction):
         self.settings, self.job_fn = settings, job_fn
-        self.store = JobStore(settings.db_path)
+        self.store = SQLiteJobStore(settings.db_path)
         self.running: dict[str, tuple[BaseProcess, str]] = {}  # job id -> (process, run token)
         self._spawn = multiprocessing.get_context("spawn")
 
@@ -135,7 +136,7 @@ def _job_main(job_fn: JobFunction, settings: ServiceSettings, job_id: str, token
     """A job's process: run `job_fn` and record how it ended."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with_parent(parent_pid)
-    store = JobStore(settings.db_path)
+    store = SQLiteJobStore(settings.db_path)
     try:
         frames = job_fn(settings, job_id, token)
     except UserError as err:

@@ -8,13 +8,16 @@ import pytest
 
 from windowshop.cli import main
 from windowshop.errors import UserError
-from windowshop.pipeline import VideoSettings, is_posed_scene, make_video
+from windowshop.config import PipelineConfig
+from windowshop.overrides import apply_overrides
+from windowshop.pipeline import is_posed_scene, make_video
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
 from windowshop.video.encode import probe_video
 from shared_data import DATA
 
-TINY = VideoSettings(train_seconds=None, train_steps=4, train_side=32, frames=4, frame_size=32)
+TINY = apply_overrides(PipelineConfig(), {"fit.iters": 4, "scene.max_side": 32, "render.frames": 4,
+                                          "render.width": 32, "render.height": 32})
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +39,7 @@ def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
     for stage in stages:
         fractions = [f for s, f in calls if s == stage]
         assert fractions == sorted(fractions) and fractions[-1] == 1.0
-    assert len([f for s, f in calls if s == "render"]) >= TINY.frames
+    assert len([f for s, f in calls if s == "render"]) >= TINY.render.frames
     video = probe_video(result.mp4)
     assert (video["frames"], video["width"], video["height"]) == (4, 32, 32)
     assert result.poster.is_file() and len(list((tmp_path / "frames").glob("*.jpg"))) == 4

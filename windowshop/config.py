@@ -42,8 +42,8 @@ class NerfConfig:
     density_activation: str = "relu"  # the paper's; "softplus" never stops the gradient (no dead start)
     n_coarse: int = 64  # N_c: stratified samples per ray
     n_fine: int = 128  # N_f: inverse-CDF samples per ray for a separate fine network (0: one network)
-    near: float | None = None
-    far: float | None = None
+    near: float | None = None  # where rays start, normalised units (None: the scene's)
+    far: float | None = None  # where rays end, normalised units (None: the scene's)
     lr: float = 5e-4  # Adam's initial learning rate ...
     lr_final: float = 5e-5  # ... decayed exponentially to this at the end of the budget
 
@@ -100,7 +100,7 @@ class PrepareOptions:
     matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
     masks: bool = True  # foreground masks (by colour on a plain background, else feature hulls)
     overwrite: bool = False  # replace an earlier prepare's output folder
-    seed: int = 0
+    seed: int = 0  # random seed of structure from motion
     verbose: bool = False  # pycolmap's own logging
 
 
@@ -111,7 +111,7 @@ class FitConfig:
     iters: int | None = 3000  # stop after this many steps in total (None: no step limit)
     seconds: float | None = None  # or after this many seconds of training in total
     batch_rays: int | None = None  # rays per step, drawn from every training view (None: the model's)
-    seed: int = 0
+    seed: int = 0  # random seed of the model's initialisation and the ray batches
     log_every: int = 50  # steps between lines of log.jsonl
     checkpoint_every: int = 1000  # steps between checkpoints (one is always written at the end)
     eval_chunk: int = 8192  # rays rendered at once when evaluating
@@ -122,9 +122,9 @@ class VideoOptions:
     """The turntable's camera path and encoding (`windowshop render`); lengths in normalised units."""
 
     frames: int = 120  # frames of one revolution (or of the whole path)
-    fps: float = 30.0
-    width: int = 256
-    height: int = 256
+    fps: float = 30.0  # frames per second of the video
+    width: int = 256  # pixels
+    height: int = 256  # pixels
     path: str = "orbit"  # "orbit", "spiral" or a nerfstudio camera-path JSON file
     radius: float | None = None  # None: the median distance of the training cameras from the centre
     elevation: float | None = None  # degrees above the orbit plane; None: the training views' median

@@ -20,7 +20,7 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-from windowshop.config import FitConfig, SceneOptions
+from windowshop.config import FitConfig
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.fit.batches import PixelBank
@@ -63,7 +63,7 @@ class TrainingRun:
 
 def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         out_dir: str | Path, device: torch.device | str,
-        scene_options: SceneOptions | None = None, resume: str | Path | None = None,
+        resume: str | Path | None = None,
         show_progress: bool = True) -> dict:
     """Train `model_name` with `model_config` on `scene` into the run folder `out_dir`.
 
@@ -86,7 +86,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         group.setdefault("initial_lr", group["lr"])
     progress = _restore(model, optimizer, resume) if resume else Progress()
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
-    record = scene_record(scene, scene_options or SceneOptions())
+    record = scene_record(scene)
     run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress)
     write_config(out_dir, model_name, model_config, fit_config, run.record)
     bank = PixelBank(train_views, device, use_alpha=scene.background == "alpha")

@@ -71,17 +71,18 @@ def main() -> None:
                                       max_centre_share=round(float(errors.centre_share.max()), 4))
         if args.video:
             from windowshop.device import pick_device
-            from windowshop.pipeline import VideoSettings, make_video
+            from windowshop.config import PipelineConfig
+            from windowshop.pipeline import make_video
 
-            settings = VideoSettings(prepare=options)
+            settings = PipelineConfig(prepare=options)
             start = time.perf_counter()
             video = make_video(photos, tmp / "spin.mp4", settings, device=pick_device(), show=False)
             results["video_beer_can_20"] = {
                 "seconds": {k: round(v, 2) for k, v in video.seconds.items()},
                 "total_seconds": round(time.perf_counter() - start, 2),
                 "device": str(pick_device()),
-                "model": settings.model, "train_seconds": settings.train_seconds,
-                "frames": settings.frames, "frame_size": settings.frame_size,
+                "model": settings.model, "train_seconds": settings.fit.seconds,
+                "frames": settings.render.frames, "frame_size": settings.render.width,
                 "held_out_psnr": video.metrics.get("psnr")}
     text = json.dumps(results, indent=2)
     print(text)

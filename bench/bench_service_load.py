@@ -26,8 +26,9 @@ from pathlib import Path
 
 import httpx
 
-FAST_JOB = {"WINDOWSHOP_MODEL": "fast", "WINDOWSHOP_TRAIN_SECONDS": "20", "WINDOWSHOP_FRAMES": "12",
-            "WINDOWSHOP_FRAME_SIZE": "64", "WINDOWSHOP_DEVICE": "cpu"}
+FAST_JOB = {"WINDOWSHOP_JOB__MODEL": "fast", "WINDOWSHOP_JOB__FIT__SECONDS": "20",
+            "WINDOWSHOP_JOB__RENDER__FRAMES": "12", "WINDOWSHOP_JOB__RENDER__WIDTH": "64",
+            "WINDOWSHOP_JOB__RENDER__HEIGHT": "64", "WINDOWSHOP_DEVICE": "cpu"}
 
 
 def scene_zip(folder: Path) -> bytes:

@@ -18,11 +18,12 @@ import httpx
 
 # Service settings that make a job take seconds: few training steps, few small frames.
 FAST_JOB = {
-    "WINDOWSHOP_MODEL": "fast",
-    "WINDOWSHOP_TRAIN_SECONDS": "4",
-    "WINDOWSHOP_FRAMES": "8",
-    "WINDOWSHOP_FRAME_SIZE": "48",
-    "WINDOWSHOP_FPS": "12",
+    "WINDOWSHOP_JOB__MODEL": "fast",
+    "WINDOWSHOP_JOB__FIT__SECONDS": "4",
+    "WINDOWSHOP_JOB__RENDER__FRAMES": "8",
+    "WINDOWSHOP_JOB__RENDER__WIDTH": "48",
+    "WINDOWSHOP_JOB__RENDER__HEIGHT": "48",
+    "WINDOWSHOP_JOB__RENDER__FPS": "12",
     "WINDOWSHOP_DEVICE": "cpu",
     "WINDOWSHOP_POLL_SECONDS": "0.2",
 }

@@ -76,8 +76,9 @@ def test_progress_follows_steps_or_seconds():
 
 def test_fit_writes_a_complete_run_folder(tmp_path):
     scene = toy_scene()
+    scene.options = SceneOptions(views=4)  # as load_scene records the options it loaded with
     metrics = fit(scene, "nerf", TINY, FitConfig(iters=4, batch_rays=32, log_every=2), tmp_path / "run",
-                  "cpu", scene_options=SceneOptions(views=4), show_progress=False)
+                  "cpu", show_progress=False)
     run_dir = tmp_path / "run"
     saved = json.loads((run_dir / "metrics.json").read_text())
     for key in ("psnr", "ssim", "test_views", "train_seconds", "iterations"):
@@ -171,15 +172,17 @@ def test_mean_color_floor():
 def test_fit_command_seconds_replace_the_step_budget(tmp_path, monkeypatch):
     import windowshop.scene as scene_module
     from windowshop.errors import UserError
-    from windowshop.fit.command import build_model_config, fit_command
+    from windowshop.fit.command import fit_command
 
     monkeypatch.setattr(scene_module, "load_scene", lambda path, options: toy_scene(), raising=False)
-    overrides = {"depth": 2, "width": 16, "n_coarse": 8, "freqs": 2}
-    metrics = fit_command("toy", SceneOptions(), "nerf", "tiny", overrides,
-                          {"seconds": 0.5, "iters": None, "batch_rays": 16}, str(tmp_path), None, "cpu")
+    overrides = {"model": "nerf", "preset": "tiny", "depth": 2, "width": 16, "n_coarse": 8,
+                 "freqs": 2, "seconds": 0.5, "batch_rays": 16}
+    metrics = fit_command("toy", overrides, str(tmp_path), None, "cpu")
     assert metrics["iterations"] >= 1 and metrics["train_seconds"] >= 0.5
     assert json.loads((tmp_path / "config.json").read_text())["fit_config"]["iters"] is None
     with pytest.raises(UserError, match="fast.* has no setting n_fine; its settings: .*voxels"):
-        build_model_config("fast", None, {"n_fine": 0})
+        fit_command("toy", {"n_fine": 0}, str(tmp_path / "x"), None, "cpu")
+    with pytest.raises(UserError, match="must be an integer"):  # typed, as the study's switches
+        fit_command("toy", {"model": "nerf", "depth": 2.5}, str(tmp_path / "y"), None, "cpu")
     with pytest.raises(UserError, match="resumed run keeps its model"):
-        fit_command(None, SceneOptions(), "nerf", None, {"width": 8}, {}, None, str(tmp_path), "cpu")
+        fit_command(None, {"width": 8}, None, str(tmp_path), "cpu")

@@ -12,7 +12,7 @@ from PIL import Image
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
-from windowshop.photos.prepare import check_out_dir, parse_intrinsics, prepare
+from windowshop.photos.prepare import check_out_dir, prepare
 from shared_data import DATA
 
 KERMIT = DATA / "kermit"
@@ -110,6 +110,9 @@ def test_an_existing_output_folder(tmp_path):
 
 
 @pytest.mark.parametrize("text", ["1,2,3", "a,b,c,d", "1,2,3,-4"])
-def test_bad_intrinsics(text):
-    with pytest.raises(UserError, match=r"four positive numbers"):
-        parse_intrinsics(text)
+def test_bad_intrinsics(text, tmp_path, capsys):
+    from windowshop.cli import main
+
+    assert main(["prepare", str(KERMIT), "--out", str(tmp_path / "o"), "--intrinsics", text]) == 2
+    assert "four positive numbers" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before any work

@@ -96,6 +96,23 @@ def refused(response, status: int, code: str) -> str:
 
 # ---- creating jobs -------------------------------------------------------------------------
 
+def test_a_job_may_lower_its_settings_but_not_raise_them(client):
+    from windowshop.service.jobs import load_job_config
+
+    job = client.post("/api/jobs", files=photos(3), data={"settings": '{"render.frames": 12}'})
+    assert job.status_code == 201, job.text
+    folder = client.settings.jobs_dir / job.json()["id"]
+    config = load_job_config(folder, client.settings)
+    assert config.render.frames == 12 and config.fit == client.settings.job.fit
+    detail = refused(client.post("/api/jobs", files=photos(3),
+                                 data={"settings": '{"fit.seconds": 9999}'}), 422, "bad_settings")
+    assert "fit.seconds may be at most 60" in detail
+    refused(client.post("/api/jobs", files=photos(3), data={"settings": "[1]"}), 422, "bad_settings")
+    refused(client.post("/api/jobs", files=photos(3), data={"settings": '{"warp": 9}'}), 422,
+            "bad_settings")
+    assert len(job_folders(client)) == 1  # refused uploads leave nothing behind
+
+
 def test_photos_make_a_queued_job_with_an_unguessable_id(client):
     first = client.post("/api/jobs", files=photos(3))
     second = client.post("/api/jobs", files=photos(4))

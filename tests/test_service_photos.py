@@ -26,7 +26,7 @@ def test_photos_become_a_turntable(tmp_path):
         status = service.wait_for(job_id, ("done", "failed"), timeout=600)
         assert status["state"] == "done", status["error"]
         assert status["stages"] == {"preparing": 1.0, "training": 1.0, "rendering": 1.0}
-        assert len(status["links"]["frames"]) == int(FAST_JOB["WINDOWSHOP_FRAMES"])
+        assert len(status["links"]["frames"]) == int(FAST_JOB["WINDOWSHOP_JOB__RENDER__FRAMES"])
         video = httpx.get(service.url + status["links"]["video"])
         assert video.status_code == 200 and video.content[4:8] == b"ftyp"
     finally:

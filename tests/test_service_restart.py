@@ -71,8 +71,8 @@ def test_a_job_survives_a_killed_service_and_its_results_are_served(service, tmp
 
 
 def check_results(service: LiveService, job_id: str, status: dict) -> None:
-    frames = int(FAST_JOB["WINDOWSHOP_FRAMES"])
-    size = int(FAST_JOB["WINDOWSHOP_FRAME_SIZE"])
+    frames = int(FAST_JOB["WINDOWSHOP_JOB__RENDER__FRAMES"])
+    size = int(FAST_JOB["WINDOWSHOP_JOB__RENDER__WIDTH"])
     assert len(status["links"]["frames"]) == frames and status["progress"] == 1.0
     video = httpx.get(service.url + status["links"]["video"])
     assert video.status_code == 200 and video.headers["content-type"] == "video/mp4"

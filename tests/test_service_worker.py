@@ -16,6 +16,7 @@ import pytest
 from windowshop.errors import UserError
 from windowshop.service.db import MAX_ATTEMPTS, JobStore
 from windowshop.service.jobs import ProgressReporter
+from windowshop.config import FitConfig
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.worker import Worker, job_dir
 
@@ -233,11 +234,28 @@ def test_progress_of_a_posed_scene_counts_only_the_stages_it_runs(tmp_path):
     assert Path(store.path).exists()
 
 
-def test_service_settings_reach_the_pipeline():
-    from windowshop.pipeline import VideoSettings
-    from windowshop.service.jobs import video_settings
+def test_service_settings_reach_the_pipeline(monkeypatch, tmp_path):
+    from windowshop.config import PipelineConfig
+    from windowshop.errors import UserError
+    from windowshop.service.jobs import job_config, load_job_config, save_job_config
 
-    assert video_settings(ServiceSettings()) == VideoSettings()  # the pipeline's own defaults
-    fast = video_settings(ServiceSettings(train_steps=100, frames=8, frame_size=48, model="nerf"))
-    assert (fast.train_steps, fast.train_seconds, fast.frames, fast.frame_size, fast.model) == (
-        100, None, 8, 48, "nerf")  # a step budget replaces the default time budget
+    assert ServiceSettings().job == PipelineConfig()  # the pipeline's own defaults
+    monkeypatch.setenv("WINDOWSHOP_JOB__FIT__ITERS", "100")
+    monkeypatch.setenv("WINDOWSHOP_JOB__FIT__SECONDS", "none")
+    monkeypatch.setenv("WINDOWSHOP_JOB__RENDER__FRAMES", "8")
+    monkeypatch.setenv("WINDOWSHOP_JOB__MODEL", "nerf")
+    job = ServiceSettings().job  # each field is an environment variable by its dotted path
+    assert (job.fit.iters, job.fit.seconds, job.render.frames, job.model) == (100, None, 8, "nerf")
+    # An upload's settings: the same dotted keys, typed, and only lower budgets than the service's
+    settings = ServiceSettings(job=PipelineConfig())
+    mine = job_config(settings, {"render.frames": 12, "fit.seconds": 5, "voxel_pixels": 2})
+    assert (mine.render.frames, mine.fit.seconds, mine.model_settings) == (12, 5.0, {"voxel_pixels": 2})
+    with pytest.raises(UserError, match="fit.seconds may be at most 60"):
+        job_config(settings, {"fit.seconds": 600})
+    with pytest.raises(UserError, match="fit.iters may be at most"):
+        job_config(ServiceSettings(job=PipelineConfig(fit=FitConfig(iters=50, seconds=None))),
+                   {"seconds": 5})  # a time budget would lift the service's step cap
+    with pytest.raises(UserError, match="must be an integer"):
+        job_config(settings, {"render.frames": "many"})
+    save_job_config(tmp_path, mine)
+    assert load_job_config(tmp_path, settings) == mine

@@ -13,7 +13,8 @@ from PIL import Image
 from windowshop.cli import main
 from windowshop.config import FitConfig, NerfConfig, SceneOptions
 from windowshop.errors import UserError
-from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
+from windowshop.overrides import parse_assignments
+from windowshop.study.grids import budget_overrides, load_grid
 from windowshop.study.report import rank_correlation, report_markdown
 from windowshop.study.runner import ResultRow, cpu_model, resolve, study_info
 from shared_data import DATA

@@ -5,16 +5,21 @@ from __future__ import annotations
 import json
 
 import pytest
+from PIL import Image
 
 from windowshop.cli import main
 from windowshop.errors import UserError
-from windowshop.pipeline import VideoSettings, is_posed_scene, make_video
+from windowshop.config import PipelineConfig
+from windowshop.fit.checkpoint import load_run
+from windowshop.overrides import apply_overrides
+from windowshop.pipeline import is_posed_scene, make_video
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
 from windowshop.video.encode import probe_video
 from shared_data import DATA
 
-TINY = VideoSettings(train_seconds=None, train_steps=4, train_side=32, frames=4, frame_size=32)
+TINY = apply_overrides(PipelineConfig(), {"fit.iters": 4, "scene.max_side": 32, "render.frames": 4,
+                                          "render.width": 32, "render.height": 32})
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +41,7 @@ def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
     for stage in stages:
         fractions = [f for s, f in calls if s == stage]
         assert fractions == sorted(fractions) and fractions[-1] == 1.0
-    assert len([f for s, f in calls if s == "render"]) >= TINY.frames
+    assert len([f for s, f in calls if s == "render"]) >= TINY.render.frames
     video = probe_video(result.mp4)
     assert (video["frames"], video["width"], video["height"]) == (4, 32, 32)
     assert result.poster.is_file() and len(list((tmp_path / "frames").glob("*.jpg"))) == 4
@@ -46,11 +51,17 @@ def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
 
 def test_cli_video_prints_each_stage(posed, tmp_path, capsys):
     code = main(["video", str(posed), "--out", str(tmp_path / "out.mp4"), "--iters", "3",
-                 "--frames", "3", "--size", "32"])
+                 "--frames", "3", "--size", "32", "--scene.max-side", "16"])
     assert code == 0
     err = capsys.readouterr().err
     assert "fit: " in err and "render: " in err and "wrote" in err
     assert probe_video(tmp_path / "out.mp4")["frames"] == 3
+    # The run records the options the scene was trained with, so `eval` reloads it at 16 px
+    run = tmp_path / "out_work" / "run"
+    assert load_run(run).scene_options.max_side == 16
+    assert main(["eval", str(run), "--device", "cpu"]) == 0
+    truth = next((run / "eval").glob("*.png"))
+    assert Image.open(truth).height == 16  # truth | render | error side by side, 16 px high
 
 
 def test_a_foreign_work_folder_is_never_emptied(posed, tmp_path):

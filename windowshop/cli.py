@@ -2,6 +2,9 @@
 
 Heavy imports (torch, pycolmap, the service) happen inside each function so `--help` is instant.
 Errors the user can fix are raised as `windowshop.errors.UserError` and printed without a traceback.
+Each stage's flags are generated from its dataclass in windowshop/config.py (windowshop/overrides.py):
+a new field there is a new flag, with its comment as the help and its default shown, never
+repeated here.
 """
 
 from __future__ import annotations
@@ -9,82 +12,60 @@ from __future__ import annotations
 import argparse
 import sys
 
+from windowshop import config as cfg
 from windowshop.errors import UserError
+from windowshop.overrides import add_flags, apply_overrides, flag_values, parse_assignments
+
+DEVICE_HELP = "cpu, cuda, cuda:1 (default: CUDA when present)"
 
 
-def _scene_options(args: argparse.Namespace):
-    from windowshop.config import SceneOptions
+def _overrides(args: argparse.Namespace) -> dict:
+    """The generated flags the user gave, then `--set KEY=VALUE` items (which win), then `--size`."""
+    overrides = {**flag_values(args), **parse_assignments(getattr(args, "set", None) or [])}
+    if getattr(args, "size", None) is not None:
+        from windowshop.video.paths import parse_size
 
-    return SceneOptions(downscale=args.downscale, max_side=args.max_side, views=args.views,
-                        test_views=args.test_views, background=args.background)
+        width, height = parse_size(args.size)
+        overrides.update({"render.width": width, "render.height": height} if args.size_in_render
+                         else {"width": width, "height": height})
+    return overrides
 
 
-def _add_scene_flags(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("scene loading")
-    g.add_argument("--downscale", type=float, default=1.0, help="divide the resolution by K")
-    g.add_argument("--max-side", type=int, default=None, help="resize so the longer side is at most N")
-    g.add_argument("--views", type=int, default=None, help="keep N training views spread evenly")
-    g.add_argument("--test-views", type=int, default=None, help="keep K evenly spaced test views")
-    g.add_argument("--background", choices=["white", "black", "alpha"], default="white",
-                   help="background for sources with alpha")
+def _add_size(p: argparse.ArgumentParser, nested: bool) -> None:
+    p.add_argument("--size", default=None, metavar="N|WxH",
+                   help="turntable size: N (square) or WxH pixels; sets width and height")
+    p.set_defaults(size_in_render=nested)
+
+
+def _add_set(p: argparse.ArgumentParser, example: str) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help=f"any setting by name or dotted path, typed as its field, e.g. --set {example} "
+                        "(repeat; see windowshop/config.py)")
+
+
+def _model_flags(p: argparse.ArgumentParser) -> None:
+    """Flags of every model's own settings (a name two models share appears once)."""
+    from windowshop.model import MODELS, model_class
+
+    seen: set[str] = set()
+    for name in MODELS:
+        config_type = model_class(name).config_type
+        add_flags(p, config_type, f"{name} model (override the preset)", exclude=tuple(seen))
+        seen |= {f for f in config_type.__dataclass_fields__}
 
 
 def cmd_inspect(args: argparse.Namespace) -> None:
     from windowshop.scene.inspect import inspect_command
 
-    inspect_command(args.path, _scene_options(args), as_json=args.json, plot=args.plot)
-
-
-DEFAULT_MODEL = "fast"  # the model `fit`, `demo` and `video` train unless --model says otherwise
-
-
-def _add_fit_flags(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("training (defaults: windowshop.config.FitConfig)")
-    budget = g.add_mutually_exclusive_group()
-    budget.add_argument("--iters", type=int, default=None, help="train for N steps in total")
-    budget.add_argument("--seconds", type=float, default=None, help="train for S seconds in total")
-    g.add_argument("--batch-rays", type=int, default=None, help="rays per step")
-    g.add_argument("--seed", type=int, default=None)
-    g.add_argument("--log-every", type=int, default=None, help="steps between log.jsonl lines")
-    g.add_argument("--checkpoint-every", type=int, default=None, help="steps between checkpoints")
-    g.add_argument("--eval-chunk", type=int, default=None, help="rays rendered at once in evaluation")
-
-
-def _add_nerf_flags(p: argparse.ArgumentParser) -> list[str]:
-    """NeRF settings; each flag's dest is a NerfConfig field. Returns the dests."""
-    g = p.add_argument_group("nerf model (override the preset)")
-    flags = [("--freqs", int, "L: position encoding frequencies"),
-             ("--freqs-dir", int, "L_dir: direction encoding frequencies"),
-             ("--depth", int, "D: layers of the MLP"), ("--width", int, "W: width of the MLP"),
-             ("--skip", int, "concatenate the input again after this many layers (0: never)"),
-             ("--n-coarse", int, "N_c: stratified samples per ray"),
-             ("--n-fine", int, "N_f: hierarchical samples for a fine network (0: none)"),
-             ("--near", float, "near distance, normalised units (default: the scene's)"),
-             ("--far", float, "far distance, normalised units (default: the scene's)"),
-             ("--lr", float, "initial learning rate"), ("--lr-final", float, "final learning rate")]
-    for flag, kind, text in flags:
-        g.add_argument(flag, type=kind, default=None, help=text)
-    g.add_argument("--view-dependent", action=argparse.BooleanOptionalAction, default=None,
-                   help="colour depends on the viewing direction")
-    g.add_argument("--encoding-pi", action=argparse.BooleanOptionalAction, default=None,
-                   help="sin(2^k pi p) as the paper's formula instead of its code's sin(2^k p)")
-    g.add_argument("--density-activation", choices=["relu", "softplus"], default=None,
-                   help="relu as the paper; softplus cannot get stuck at zero density")
-    return [f[0][2:].replace("-", "_") for f in flags] + ["view_dependent", "encoding_pi",
-                                                          "density_activation"]
+    options = apply_overrides(cfg.SceneOptions(), flag_values(args), "inspect")
+    inspect_command(args.path, options, as_json=args.json, plot=args.plot)
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
     from windowshop.device import pick_device
     from windowshop.fit.command import fit_command, summary
-    from windowshop.study.grids import parse_assignments
 
-    model_overrides = {k: getattr(args, k) for k in args.model_flags if getattr(args, k) is not None}
-    model_overrides.update(parse_assignments(args.set))
-    fit_overrides = {k: getattr(args, k) for k in ("iters", "seconds", "batch_rays", "seed",
-                                                  "log_every", "checkpoint_every", "eval_chunk")}
-    metrics = fit_command(args.scene, _scene_options(args), args.model, args.preset, model_overrides,
-                          fit_overrides, args.out, args.resume, pick_device(args.device))
+    metrics = fit_command(args.scene, _overrides(args), args.out, args.resume, pick_device(args.device))
     print(summary(metrics))
 
 
@@ -96,15 +77,10 @@ def cmd_eval(args: argparse.Namespace) -> None:
 
 
 def cmd_render(args: argparse.Namespace) -> None:
-    from windowshop.config import VideoOptions
     from windowshop.device import pick_device
-    from windowshop.video.paths import parse_size
     from windowshop.video.turntable import default_outputs, render_command
 
-    width, height = parse_size(args.size)
-    options = VideoOptions(frames=args.frames, fps=args.fps, width=width, height=height,
-                           path=args.path, radius=args.radius, elevation=args.elevation,
-                           start_angle=args.start_angle, fov=args.fov, chunk=args.chunk)
+    options = apply_overrides(cfg.VideoOptions(), _overrides(args), "render")
     outputs = default_outputs(args.out, gif=args.gif, webp=args.webp, depth=args.depth,
                               poster=args.poster, frames_dir=args.frames_dir,
                               frames_format=args.frames_format)
@@ -112,16 +88,12 @@ def cmd_render(args: argparse.Namespace) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> None:
-    from windowshop.config import FitConfig
-    from windowshop.demo import DEMO_SECONDS, DemoOptions, demo_command
+    from windowshop.demo import demo_command
     from windowshop.device import pick_device
+    from windowshop.model import apply_run_overrides
 
-    budget = {"iters": args.iters, "seconds": args.seconds or (None if args.iters else DEMO_SECONDS)}
-    sizes = {"views": args.views, "image_size": args.image_size, "frames": args.frames,
-             "video_size": args.size}
-    options = DemoOptions(**{k: v for k, v in sizes.items() if v is not None})
-    demo_command(args.out, args.model, args.preset, FitConfig(**budget), options,
-                 pick_device(args.device))
+    config = apply_run_overrides(cfg.DemoConfig(), _overrides(args), "demo")
+    demo_command(args.out, config, pick_device(args.device))
 
 
 def cmd_study(args: argparse.Namespace) -> None:
@@ -142,29 +114,23 @@ def cmd_study(args: argparse.Namespace) -> None:
 
 
 def cmd_prepare(args: argparse.Namespace) -> None:
-    from windowshop.config import PrepareOptions
-    from windowshop.photos.prepare import parse_intrinsics, prepare
+    from dataclasses import replace
 
-    options = PrepareOptions(max_side=args.max_side or None, frames=args.frames,
-                             intrinsics=parse_intrinsics(args.intrinsics), matcher=args.matcher,
-                             masks=not args.no_masks, overwrite=args.overwrite, verbose=args.verbose)
+    from windowshop.photos.prepare import check_intrinsics, prepare
+
+    options = apply_overrides(cfg.PrepareOptions(), flag_values(args), "prepare")
+    options = replace(options, max_side=options.max_side or None)  # 0: the photos' own size
+    check_intrinsics(options.intrinsics)
     prepare(args.input, args.out, options)
 
 
 def cmd_video(args: argparse.Namespace) -> None:
-    from dataclasses import replace
-
     from windowshop.device import pick_device
-    from windowshop.pipeline import VideoSettings, make_video
+    from windowshop.model import apply_run_overrides
+    from windowshop.pipeline import make_video
 
-    base = VideoSettings()
-    budget = ({"train_seconds": None, "train_steps": args.iters} if args.iters else
-              {"train_seconds": args.seconds or base.train_seconds})
-    settings = replace(base, model=args.model, **budget, frames=args.frames, fps=args.fps,
-                       frame_size=args.size,
-                       prepare=replace(base.prepare, max_side=args.max_side or None,
-                                       verbose=args.verbose))
-    make_video(args.input, args.out, settings, work_dir=args.work, device=pick_device(args.device))
+    config = apply_run_overrides(cfg.PipelineConfig(), _overrides(args), "video")
+    make_video(args.input, args.out, config, work_dir=args.work, device=pick_device(args.device))
 
 
 def cmd_serve(args: argparse.Namespace) -> None:
@@ -207,64 +173,44 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("path")
     p.add_argument("--json", action="store_true", help="print the machine-readable summary")
     p.add_argument("--plot", default=None, help="draw the cameras around the object into FILE.png")
-    _add_scene_flags(p)
+    add_flags(p, cfg.SceneOptions, "scene loading")
     p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser("render", help="render a run's 360° turntable video")
     p.add_argument("run", help="run folder written by `windowshop fit`")
     p.add_argument("--out", required=True, help="the MP4 to write (H.264, plays in browsers)")
-    p.add_argument("--frames", type=int, default=120, help="frames in one turn")
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--size", default="256", help="N (square) or WxH pixels")
-    p.add_argument("--path", default="orbit",
-                   help="orbit, spiral, or a nerfstudio camera-path JSON (which sets frames and size)")
-    p.add_argument("--radius", type=float, help="orbit radius in normalised units (default: cameras')")
-    p.add_argument("--elevation", type=float, help="degrees above the object (default: cameras')")
-    p.add_argument("--start-angle", type=float, default=0.0,
-                   help="degrees past the first training photo's direction")
-    p.add_argument("--fov", type=float, help="vertical field of view, degrees (default: cameras')")
+    add_flags(p, cfg.VideoOptions, "turntable")
+    _add_size(p, nested=False)
     for name, what in [("gif", "an animated GIF"), ("webp", "an animated WebP"),
                        ("depth", "a colour-mapped depth MP4"), ("poster", "the first frame")]:
         p.add_argument(f"--{name}", nargs="?", const=True, default=False, metavar="FILE",
                        help=f"also write {what} (default name beside --out)")
     p.add_argument("--frames-dir", help="also write every frame as an image into DIR")
     p.add_argument("--frames-format", choices=["png", "jpg"], default="png")
-    p.add_argument("--chunk", type=int, default=8192, help="rays rendered at once (memory)")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("demo", help="fit the built-in object and render its turntable (minutes, CPU)")
+    p = sub.add_parser("demo", help="fit the built-in object and render its turntable (about a minute, CPU)")
     p.add_argument("--out", required=True, help="folder for run/, turntable.mp4, its poster, demo.json")
-    p.add_argument("--model", default=DEFAULT_MODEL, help="registered model name (nerf, fast)")
-    p.add_argument("--preset", default=None, help="named settings of the model")
-    budget = p.add_mutually_exclusive_group()
-    budget.add_argument("--iters", type=int, default=None, help="training steps")
-    budget.add_argument("--seconds", type=float, default=None,
-                        help="or seconds of training (default: 30)")
-    p.add_argument("--views", type=int, help="training views of the object (default: 40)")
-    p.add_argument("--image-size", type=int, help="pixels a side of the training views (default: 64)")
-    p.add_argument("--frames", type=int, help="turntable frames (default: 60)")
-    p.add_argument("--size", type=int, help="pixels a side of the turntable (default: 128)")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
+    add_flags(p, cfg.DemoConfig, "demo", exclude=("model_settings",))
+    _add_size(p, nested=True)
+    _add_set(p, "voxel_pixels=2")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("fit", help="train a model on a posed scene into a run folder")
     p.add_argument("scene", nargs="?", help="posed scene (optional with --resume)")
-    p.add_argument("--model", default=DEFAULT_MODEL, help="registered model name (nerf, fast)")
-    p.add_argument("--preset", default=None, help="named settings of the model (nerf: paper, tiny)")
     p.add_argument("--out", default=None, help="run folder to write")
     p.add_argument("--resume", default=None, metavar="RUN", help="carry on training this run folder")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA when present)")
-    _add_scene_flags(p)
-    _add_fit_flags(p)
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="any setting of the model's config, e.g. --set voxel_pixels=2 (fast: "
-                        "windowshop.config.FastConfig)")
-    p.set_defaults(func=cmd_fit, model_flags=_add_nerf_flags(p))
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
+    add_flags(p, cfg.RunConfig, "fit", exclude=("model_settings",))
+    _model_flags(p)
+    _add_set(p, "voxel_pixels=2")
+    p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("eval", help="measure a run on its held-out views; write eval/*.png")
     p.add_argument("run", help="run folder written by `windowshop fit`")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA when present)")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("study", help="run a grid of fits (the seed's Table 1) into REPORT.md",
@@ -278,9 +224,8 @@ def build_parser() -> argparse.ArgumentParser:
     budget = p.add_mutually_exclusive_group()
     budget.add_argument("--iters", type=int, default=None, help="every run's steps (not the grid's)")
     budget.add_argument("--seconds", type=float, default=None, help="or every run's training seconds")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="a fit switch for every run, e.g. batch_rays=1024 or test_views=2 (repeat)")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA when present)")
+    _add_set(p, "batch_rays=1024 or --set test_views=2")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--broker", default=None, metavar="URL", help="run the combinations on the "
                    "workers of this Redis broker (redis://HOST:6379/0, docs/scaling.md)")
@@ -289,35 +234,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("prepare", help="photos (folder or zip) or a video -> a posed scene folder")
     p.add_argument("input", help="a folder or zip of photos (JPEG, PNG, WebP, HEIC) or a video")
     p.add_argument("--out", required=True, help="new folder: transforms.json, images/, masks/, report")
-    p.add_argument("--max-side", type=int, default=640,
-                   help="working resolution: longer side in pixels (0: keep the photos' size)")
-    p.add_argument("--frames", type=int, default=40, help="frames sampled from a video")
-    p.add_argument("--intrinsics", default=None, metavar="FX,FY,CX,CY",
-                   help="known camera intrinsics in pixels of the photos (kept fixed)")
-    p.add_argument("--matcher", choices=["auto", "exhaustive", "sequential"], default="auto",
-                   help="feature matching (auto: sequential for a video, else exhaustive)")
-    p.add_argument("--no-masks", action="store_true",
-                   help="no foreground masks (the model then learns the whole photos)")
-    p.add_argument("--overwrite", action="store_true", help="replace an earlier prepare in --out")
+    add_flags(p, cfg.PrepareOptions, "prepare")
     p.set_defaults(func=cmd_prepare)
 
     p = sub.add_parser("video", help="photos, a video or a posed scene -> a 360° turntable MP4",
                        description="Chains prepare (skipped for a posed scene), fit and render with "
-                                   "defaults chosen for speed, printing each stage and its time.")
+                                   "defaults chosen for speed, printing each stage and its time. "
+                                   "A setting two stages share is named by its stage: "
+                                   "--prepare.max-side, --scene.max-side.")
     p.add_argument("input", help="a folder or zip of photos, a video, or a posed scene")
     p.add_argument("--out", required=True, help="the MP4 to write (a poster JPEG goes beside it)")
     p.add_argument("--work", default=None, help="folder for the posed scene and the run "
                                                 "(default: <out>_work beside the MP4)")
-    p.add_argument("--model", default="fast", help="registered model name (fast, nerf)")
-    budget = p.add_mutually_exclusive_group()
-    budget.add_argument("--seconds", type=float, default=None, help="training seconds (default 60)")
-    budget.add_argument("--iters", type=int, default=None, help="or training steps")
-    p.add_argument("--max-side", type=int, default=640,
-                   help="working resolution of the photos (0: keep their size)")
-    p.add_argument("--frames", type=int, default=60, help="turntable frames")
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--size", type=int, default=256, help="pixels a side of the turntable")
-    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: CUDA if present)")
+    add_flags(p, cfg.PipelineConfig, "video", exclude=("model_settings",))
+    _add_size(p, nested=True)
+    _add_set(p, "voxel_pixels=2")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.set_defaults(func=cmd_video)
 
     p = sub.add_parser("serve", help="the web service and page: upload photos, get a 360° video",

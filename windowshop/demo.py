@@ -9,33 +9,14 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from windowshop.config import FitConfig, VideoOptions
+from windowshop.config import DemoConfig, SceneOptions
 from windowshop.scene.types import Camera
-
-# Training budget unless --iters or --seconds says otherwise: time, not steps, so the demo takes
-# under a minute on any CPU however fast the model's steps are there. (On the 2-core CPU the fast
-# model's held-out PSNR is the same after 30 s as after 120 s, 24.9 dB: what is left is the
-# aliasing of the exact, point-sampled training images.)
-DEMO_SECONDS = 30.0
-
-
-@dataclass(frozen=True)
-class DemoOptions:
-    """Sizes of the demo: training views and the turntable."""
-
-    views: int = 40  # training views of the object
-    test_views: int = 8  # held-out views fit measures
-    image_size: int = 64  # pixels a side of every training view
-    frames: int = 60  # turntable frames
-    video_size: int = 128  # pixels a side of the turntable
-    fps: float = 30.0
-
 
 def turntable_psnr(video: Path, cameras: list[Camera], background: tuple[float, float, float]) -> float:
     """Mean PSNR (dB) of the decoded frames of `video` against the exact images of `cameras`."""
@@ -49,8 +30,7 @@ def turntable_psnr(video: Path, cameras: list[Camera], background: tuple[float, 
     return float(np.mean(scores))
 
 
-def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_config: FitConfig,
-             options: DemoOptions, device: torch.device | str) -> dict:
+def run_demo(out_dir: str | Path, config: DemoConfig, device: torch.device | str) -> dict:
     """Fit the built-in object into `out_dir/run` and render `out_dir/turntable.mp4` (+ poster).
 
     Returns (and writes to `out_dir/demo.json`) the held-out metrics, the turntable's PSNR
@@ -59,7 +39,6 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.render.frames import display_background
-    from windowshop.config import SceneOptions
     from windowshop.scene import load_scene
     from windowshop.scene.synthetic import synthetic_scene
     from windowshop.scene.writer import write_transforms
@@ -67,7 +46,8 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     from windowshop.video.paths import turntable_path
     from windowshop.video.turntable import default_outputs, render_run
 
-    check_video_size(options.video_size, options.video_size)  # before minutes of training
+    check_video_size(config.render.width, config.render.height)  # before minutes of training
+    options = config.demo
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -76,16 +56,15 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
                                 size=options.image_size)
     scene_options = SceneOptions(background=synthetic.background)
     scene = load_scene(write_transforms(synthetic, out_dir / "scene"), scene_options)
-    metrics = fit(scene, model_name, model_config(model_name, preset), fit_config, out_dir / "run",
-                  device, scene_options=scene_options)
-    video = VideoOptions(frames=options.frames, fps=options.fps, width=options.video_size,
-                         height=options.video_size)
+    model = model_config(config.model, config.preset, **config.model_settings)
+    metrics = fit(scene, config.model, model, config.fit, out_dir / "run", device)
+    video = config.render
     outputs = default_outputs(out_dir / "turntable.mp4", poster=True)
     result = render_run(out_dir / "run", video, outputs, device)
     cameras = turntable_path([v.camera for v in scene.split("train")], video)  # as render_run's
     summary = {
-        "model": model_name, "preset": preset, "fit_config": asdict(fit_config),
-        "demo_options": asdict(options), "device": str(device),
+        "model": config.model, "preset": config.preset, "config": asdict(config),
+        "device": str(device),
         "held_out_psnr": metrics.get("psnr"), "held_out_ssim": metrics.get("ssim"),
         "turntable_psnr": turntable_psnr(outputs.mp4, cameras, display_background(scene.background)),
         "train_seconds": metrics.get("train_seconds"), "iterations": metrics.get("iterations"),
@@ -97,10 +76,9 @@ def run_demo(out_dir: str | Path, model_name: str, preset: str | None, fit_confi
     return summary
 
 
-def demo_command(out_dir: str | Path, model_name: str, preset: str | None, fit_config: FitConfig,
-                 options: DemoOptions, device: torch.device | str) -> dict:
+def demo_command(out_dir: str | Path, config: DemoConfig, device: torch.device | str) -> dict:
     """`windowshop demo`: run it and say what came out."""
-    summary = run_demo(out_dir, model_name, preset, fit_config, options, device)
+    summary = run_demo(out_dir, config, device)
     print(f"{summary['model']}: {summary['iterations']} steps in {summary['train_seconds']:.0f} s; "
           f"held-out PSNR {summary['held_out_psnr']:.2f} dB, turntable PSNR against the true "
           f"frames {summary['turntable_psnr']:.2f} dB; {summary['total_seconds']:.0f} s in all")

@@ -18,6 +18,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from windowshop.errors import UserError
+from windowshop.overrides import apply_overrides, leaves
+
 
 @dataclass(frozen=True)
 class Bounds:
@@ -95,16 +98,39 @@ MODELS = {
 def model_class(name: str) -> type[RadianceModel]:
     """The class registered under `name`."""
     if name not in MODELS:
-        raise ValueError(f"unknown model {name!r}; choose one of {', '.join(sorted(MODELS))}")
+        raise UserError(f"unknown model {name!r}; choose one of {', '.join(sorted(MODELS))}")
     module, attr = MODELS[name].split(":")
     return getattr(importlib.import_module(module), attr)
 
 
+def apply_run_overrides(config: Any, overrides: dict[str, Any], where: str = "settings") -> Any:
+    """`config` (a RunConfig or PipelineConfig) with `overrides`; a bare key that only the model's
+    own config has (`voxel_pixels`) goes to `model_settings`, and the model's settings are checked."""
+    model = overrides.get("model", config.model)
+    names = {f.name for f in dataclasses.fields(model_class(model).config_type)}
+    paths = leaves(type(config))
+    if unknown := sorted(k for k in overrides if not _known(k, paths) and "." not in k
+                         and k.replace("-", "_") not in names):
+        raise UserError(f"{where}: model {model!r} has no setting {', '.join(unknown)}; its "
+                        f"settings: {', '.join(sorted(names))}; the run's: {', '.join(sorted(paths))}")
+    routed = {(f"model_settings.{k}" if k.replace("-", "_") in names and not _known(k, paths) else k): v
+              for k, v in overrides.items()}
+    config = apply_overrides(config, routed, where)
+    model_config(config.model, config.preset, **config.model_settings)  # a bad setting fails now
+    return config
+
+
+def _known(key: str, paths: dict) -> bool:
+    key = key.replace("-", "_")
+    return key in paths or any(p.endswith("." + key) for p in paths)
+
+
 def model_config(name: str, preset: str | None = None, **overrides: Any) -> Any:
-    """The config of model `name`: its `preset` (default: its first) with `overrides` applied."""
+    """The config of model `name`: its `preset` (default: its first) with `overrides` applied,
+    each checked against the field's type; UserError names an unknown preset or setting."""
     cls = model_class(name)
     preset = preset or next(iter(cls.presets))
     if preset not in cls.presets:
-        raise ValueError(f"unknown preset {preset!r} of model {name!r}; "
-                         f"choose one of {', '.join(cls.presets)}")
-    return dataclasses.replace(cls.presets[preset], **overrides)
+        raise UserError(f"unknown preset {preset!r} of model {name!r}; "
+                        f"choose one of {', '.join(cls.presets)}")
+    return apply_overrides(cls.presets[preset], overrides, f"model {name!r}")

@@ -14,31 +14,16 @@ import json
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
-from windowshop.config import FitConfig, PrepareOptions, SceneOptions, VideoOptions
+from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
 from windowshop.photos.progress import StageCallback
 
 MARKER = "video.json"  # the summary a work folder of make_video holds (and may be replaced by)
-
-
-@dataclass(frozen=True)
-class VideoSettings:
-    """The defaults of `windowshop video`, chosen for speed on a CPU."""
-
-    model: str = "fast"
-    preset: str | None = None
-    train_seconds: float | None = 60.0  # training budget (None: train_steps only)
-    train_steps: int | None = None
-    train_side: int = 320  # longer side of the training images, pixels
-    frames: int = 60
-    fps: float = 30.0
-    frame_size: int = 256  # the turntable is frame_size x frame_size
-    prepare: PrepareOptions = field(default_factory=PrepareOptions)
 
 
 @dataclass
@@ -74,11 +59,12 @@ def _work_dir(work: Path) -> Path:
     return work
 
 
-def make_video(source: str | Path, out_mp4: str | Path, settings: VideoSettings = VideoSettings(),
+def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig = PipelineConfig(),
                work_dir: str | Path | None = None, device: torch.device | str = "cpu",
                poster: bool | str = True, frames_dir: str | Path | None = None,
                on_stage: StageCallback | None = None, show: bool = True) -> VideoResult:
-    """Photos (folder or zip), a video, or a posed scene at `source` -> the turntable `out_mp4`.
+    """Photos (folder or zip), a video, or a posed scene at `source` -> the turntable `out_mp4`,
+    every stage set by `config`.
 
     `work_dir` (default: `<out stem>_work` beside the MP4) keeps the posed scene (`scene/`) and
     the trained run (`run/`). `poster` writes the first frame beside the MP4 (True) or to a path;
@@ -110,31 +96,27 @@ def make_video(source: str | Path, out_mp4: str | Path, settings: VideoSettings 
     start = time.perf_counter()
     scene_dir = source
     if not is_posed_scene(source):
-        scene_dir = prepare(source, work / "scene", settings.prepare, on_stage, show).out_dir
+        scene_dir = prepare(source, work / "scene", config.prepare, on_stage, show).out_dir
         done("prepare", start)
 
     start = time.perf_counter()
     report("fit", 0.0)
-    scene = load_scene(scene_dir, SceneOptions(max_side=settings.train_side))
-    budget = FitConfig(iters=settings.train_steps, seconds=settings.train_seconds, log_every=10,
-                       checkpoint_every=10**9)
-    metrics = fit(scene, settings.model, model_config(settings.model, settings.preset), budget,
-                  work / "run", device, show_progress=show,
+    scene = load_scene(scene_dir, config.scene)
+    model = model_config(config.model, config.preset, **config.model_settings)
+    metrics = fit(scene, config.model, model, config.fit, work / "run", device, show_progress=show,
                   callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
 
     start = time.perf_counter()
     report("render", 0.0)
-    options = VideoOptions(frames=settings.frames, fps=settings.fps, width=settings.frame_size,
-                           height=settings.frame_size)
     outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, frames_format="jpg")
-    render_run(work / "run", options, outputs, device, progress=show,
+    render_run(work / "run", config.render, outputs, device, progress=show,
                on_frame=lambda k, n: report("render", k / n))
     done("render", start)
 
     result = VideoResult(mp4=out_mp4, poster=outputs.poster, scene_dir=Path(scene_dir),
                          run_dir=work / "run", seconds=seconds, metrics=metrics)
-    (work / MARKER).write_text(json.dumps({**asdict(result), "settings": asdict(settings)},
+    (work / MARKER).write_text(json.dumps({**asdict(result), "config": asdict(config)},
                                           indent=2, default=str))
     if show:
         print(f"wrote {out_mp4} in {sum(seconds.values()):.0f} s", file=sys.stderr)

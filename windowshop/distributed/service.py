@@ -10,6 +10,7 @@ over HTTP, so they share no disk with the service.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import secrets
 import shutil
@@ -27,13 +28,11 @@ from windowshop.distributed.celery_app import ClusterSettings, configure, gpu_wo
 from windowshop.distributed.store import PREPARE, TRAIN, ClusterStore, default_db_url
 from windowshop.distributed.transfer import replace_folder, unzip_to, zip_folder
 from windowshop.service.db import Job
+from windowshop.service.jobs import load_job_config
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.worker import job_dir
 
 log = logging.getLogger("windowshop.service")
-# The service's settings a worker needs to run a job the way this service would.
-KNOBS = ("model", "preset", "train_seconds", "train_steps", "train_side", "frames", "fps",
-         "frame_size", "device")
 
 
 class ClusterJobs:
@@ -63,10 +62,11 @@ class ClusterJobs:
         """Send the task of the job's current phase: prepare on `cpu`, train on `gpu` if any."""
         row = self.store.row(job_id)
         queue = "gpu" if row["phase"] == TRAIN and self.have_gpu_workers() else "cpu"
-        knobs = {k: getattr(self.settings, k) for k in KNOBS if getattr(self.settings, k) is not None}
+        # the worker runs the job as this service would: its job config, as JSON
+        job = dataclasses.asdict(load_job_config(job_dir(self.settings, job_id), self.settings))
         self.celery.send_task(
             "windowshop.job_phase", task_id=job_id, queue=queue,
-            args=(job_id, row["phase"], self.url, row["worker_key"], knobs,
+            args=(job_id, row["phase"], self.url, row["worker_key"], job,
                   self.cluster.heartbeat_seconds, self.cluster.stale_seconds))
         log.info("job %s: %s sent to the %s queue", job_id, row["phase"], queue)
 

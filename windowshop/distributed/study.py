@@ -155,8 +155,9 @@ def _write_study_json(out: Path, grid, info) -> None:
 def distributed_study(broker: str, preset: str | None, grid_file: str | None, scene: str, out: str,
                       iters: int | None, seconds: float | None, assignments: list[str]) -> list:
     """`windowshop study --broker`: run (or resume) a study on the workers; returns its rows."""
+    from windowshop.overrides import parse_assignments
     from windowshop.study.command import command_line
-    from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
+    from windowshop.study.grids import budget_overrides, load_grid
     from windowshop.study.report import REPORT, write_report
     from windowshop.study.runner import resolve, run_combination, run_state, study_info
 

@@ -26,7 +26,7 @@ _DEVICE: dict[str, str | None] = {"device": None}  # the worker's --device, for 
 
 
 @app.task(bind=True, name="windowshop.job_phase", max_retries=None)
-def job_phase(self, job_id: str, phase: str, service_url: str, key: str, knobs: dict,
+def job_phase(self, job_id: str, phase: str, service_url: str, key: str, job: dict,
               beat_seconds: float, busy_retry_seconds: float) -> str:
     """Run `phase` ("prepare" or "train") of the job; returns what happened, for the log."""
     import secrets
@@ -39,18 +39,18 @@ def job_phase(self, job_id: str, phase: str, service_url: str, key: str, knobs: 
         if answer != "run":
             return answer
         log.info("job %s: %s (try %s)", job_id, phase, client.token)
-        return _run_try(client, phase, knobs, beat_seconds)
+        return _run_try(client, phase, job, beat_seconds)
     finally:
         client.close()
 
 
-def _run_try(client: ServiceClient, phase: str, knobs: dict, beat_seconds: float) -> str:
+def _run_try(client: ServiceClient, phase: str, job: dict, beat_seconds: float) -> str:
     stop = threading.Event()
     beat = threading.Thread(target=_beat, args=(client, stop, beat_seconds), daemon=True)
     beat.start()
     try:
         with tempfile.TemporaryDirectory(prefix="windowshop-job-") as tmp:
-            (_prepare if phase == "prepare" else _train)(client, Path(tmp), knobs)
+            (_prepare if phase == "prepare" else _train)(client, Path(tmp), job)
         return "done"
     except Abandoned:
         return "abandoned"
@@ -76,26 +76,28 @@ def _beat(client: ServiceClient, stop: threading.Event, seconds: float) -> None:
         client.beat()
 
 
-def _settings(knobs: dict):
-    from windowshop.service.jobs import video_settings
-    from windowshop.service.settings import ServiceSettings
+def _config(job: dict):
+    """The service's job config (windowshop.config.PipelineConfig) from its JSON form."""
+    from pydantic import TypeAdapter
 
-    return video_settings(ServiceSettings(**knobs))
+    from windowshop.config import PipelineConfig
+
+    return TypeAdapter(PipelineConfig).validate_python(job)
 
 
-def _prepare(client: ServiceClient, tmp: Path, knobs: dict) -> None:
+def _prepare(client: ServiceClient, tmp: Path, job: dict) -> None:
     """Photos or a video -> a posed scene, uploaded to the service."""
     from windowshop.photos.prepare import prepare
     from windowshop.service.jobs import ProgressReporter, pipeline_input
 
     client.download("input", tmp / "input")
     report = ProgressReporter(client, "", client.token)
-    out = prepare(pipeline_input(tmp), tmp / "scene", _settings(knobs).prepare, report, False).out_dir
+    out = prepare(pipeline_input(tmp), tmp / "scene", _config(job).prepare, report, False).out_dir
     report("prepare", 1.0)
     client.upload("scene", Path(out))
 
 
-def _train(client: ServiceClient, tmp: Path, knobs: dict) -> None:
+def _train(client: ServiceClient, tmp: Path, job: dict) -> None:
     """The posed scene (prepared, or uploaded as one) -> the turntable, uploaded as the result."""
     from windowshop.device import pick_device
     from windowshop.pipeline import make_video
@@ -105,7 +107,7 @@ def _train(client: ServiceClient, tmp: Path, knobs: dict) -> None:
     result = tmp / "result"
     report = ProgressReporter(client, "", client.token)
     make_video(pipeline_input(tmp), result / "video.mp4",
-               _settings(knobs), work_dir=tmp / "work", device=pick_device(_DEVICE["device"]),
+               _config(job), work_dir=tmp / "work", device=pick_device(_DEVICE["device"]),
                poster=str(result / "poster.jpg"), frames_dir=result / "frames", on_stage=report,
                show=False)
     if client.abandoned.is_set():

@@ -61,12 +61,12 @@ def camera_from_dict(data: dict) -> Camera:
                   c2w=np.asarray(data["c2w"], dtype=np.float64))
 
 
-def scene_record(scene: Scene, options: SceneOptions) -> dict:
+def scene_record(scene: Scene) -> dict:
     """What a run must remember of its scene to be evaluated, resumed or rendered again."""
     source = Path(scene.source)
     source = source.resolve() if source.exists() else source  # eval may run from elsewhere
     return {"source": str(source), "format": scene.format,
-            "options": dataclasses.asdict(options), "background": scene.background,
+            "options": dataclasses.asdict(scene.options or SceneOptions()), "background": scene.background,
             "transform": np.asarray(scene.transform, dtype=float).tolist(),
             "aabb": np.asarray(scene.aabb, dtype=float).tolist(),
             "near": float(scene.near), "far": float(scene.far),

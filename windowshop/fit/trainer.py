@@ -22,7 +22,7 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-from windowshop.config import FitConfig, SceneOptions
+from windowshop.config import FitConfig
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.fit.batches import CameraRays, PixelBank
@@ -81,9 +81,9 @@ class TrainingRun:
 
 def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         out_dir: str | Path, device: torch.device | str,
-        scene_options: SceneOptions | None = None, resume: str | Path | None = None,
-        show_progress: bool = True, callbacks: FitCallbacks = FitCallbacks(),
-        extra_losses: Sequence[LossTerm] = (), virtual_cameras: Sequence[Camera] | None = None) -> dict:
+        resume: str | Path | None = None, show_progress: bool = True,
+        callbacks: FitCallbacks = FitCallbacks(), extra_losses: Sequence[LossTerm] = (),
+        virtual_cameras: Sequence[Camera] | None = None) -> dict:
     """Train `model_name` with `model_config` on `scene` into the run folder `out_dir`.
 
     With `resume` (a run folder) the model, optimizer, step and elapsed time come from its
@@ -108,7 +108,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         group.setdefault("initial_lr", group["lr"])
     progress = _restore(model, optimizer, resume) if resume else Progress()
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
-    record = scene_record(scene, scene_options or SceneOptions())
+    record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
     virtual = None
     if any(term.virtual for term in losses):

@@ -82,8 +82,8 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
     """The usable photos (or video frames) at working size."""
     dropped = Dropped()
     if inputs.kind == "video":
-        with stages.stage("sampling video frames", options.frames) as advance:
-            photos = sample_frames(inputs.files[0], options.frames, options.max_side, advance)
+        with stages.stage("sampling video frames", options.video_frames) as advance:
+            photos = sample_frames(inputs.files[0], options.video_frames, options.max_side, advance)
         check_enough(photos, dropped, what="video frames")
         return photos, dropped
     if not inputs.files:
@@ -259,14 +259,11 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
     return PrepareResult(out_dir=out_dir, transforms=transforms, report=summary)
 
 
-def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
-    """"fx,fy,cx,cy" (pixels) -> a tuple; UserError if it is not four positive numbers."""
-    if text is None:
-        return None
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != 4 or min(values) <= 0:
-        raise UserError(f"--intrinsics {text!r}: give four positive numbers fx,fy,cx,cy in pixels")
-    return values
+def check_intrinsics(values: tuple | None) -> None:
+    """UserError unless `values` (fx, fy, cx, cy in pixels, or None) are four positive numbers."""
+    if values is None:
+        return
+    numbers = [v for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    if len(values) != 4 or len(numbers) != 4 or min(numbers) <= 0:
+        shown = ",".join(str(v) for v in values)
+        raise UserError(f"--intrinsics {shown}: give four positive numbers fx,fy,cx,cy in pixels")

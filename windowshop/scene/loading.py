@@ -152,7 +152,8 @@ def build_scene(source: Source, options: SceneOptions) -> Scene:
     views = [replace(v, camera=v.camera.transformed(transform)) for v in views]
     near, far = normalize.near_far(np.stack([v.camera.center for v in views]), aabb)
     return Scene(views=views, format=source.format, source=source.path, aabb=aabb, near=near,
-                 far=far, transform=transform, background=_background(source, views, options))
+                 far=far, transform=transform, background=_background(source, views, options),
+                 options=options)
 
 
 def _background(source: Source, views: list[View], options: SceneOptions) -> str:

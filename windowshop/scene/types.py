@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -91,6 +92,9 @@ class Scene:
     # background (over black for "alpha"), so with `alpha` it can be put over any colour c as
     # image + (1 - alpha) * (c - background colour). Sources without alpha keep their own pixels.
     background: str = "white"
+    # How the source was loaded (windowshop.config.SceneOptions), so a run that records it reloads
+    # the scene exactly as it was trained on.
+    options: Any = None
 
     def split(self, name: str) -> list[View]:
         """The views of one split, in order."""

@@ -7,11 +7,15 @@ serves.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import shutil
 import threading
 import time
 from pathlib import Path
 
+from windowshop.config import PipelineConfig
+from windowshop.errors import UserError
 from windowshop.service.db import RUNNING, JobStore
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.uploads import VIDEO_SUFFIXES
@@ -95,16 +99,43 @@ def pipeline_input(folder: Path) -> Path:
     return folder / "input"
 
 
-def video_settings(settings: ServiceSettings):
-    """The pipeline's settings: its own defaults, with the knobs the service sets."""
-    from windowshop.pipeline import VideoSettings
+# Settings an upload may only lower: the service's own values bound each job's time and size.
+CAPPED = ("fit.seconds", "fit.iters", "scene.max_side", "prepare.max_side", "render.frames",
+          "render.width", "render.height")
+JOB_CONFIG = "job.json"  # in the job's folder: its PipelineConfig when the upload chose settings
 
-    knobs = {"model": settings.model, "preset": settings.preset, "frames": settings.frames,
-             "fps": settings.fps, "frame_size": settings.frame_size, "train_side": settings.train_side}
-    knobs = {k: v for k, v in knobs.items() if v is not None}
-    if settings.train_seconds is not None or settings.train_steps is not None:  # one replaces both
-        knobs.update(train_seconds=settings.train_seconds, train_steps=settings.train_steps)
-    return VideoSettings(**knobs)
+
+def job_config(settings: ServiceSettings, overrides: dict) -> PipelineConfig:
+    """The service's job config with an upload's `overrides` (dotted keys, as `--set`); UserError
+    for an unknown or ill-typed setting, or one that raises a capped budget or size."""
+    from windowshop.model import apply_run_overrides
+
+    config = apply_run_overrides(settings.job, overrides, "settings")
+    for path in CAPPED:
+        limit, asked = _get(settings.job, path), _get(config, path)
+        if limit is not None and (asked is None or asked > limit):
+            raise UserError(f"settings: {path} may be at most {limit} on this service, got {asked}")
+    return config
+
+
+def _get(config, path: str):
+    for part in path.split("."):
+        config = getattr(config, part)
+    return config
+
+
+def save_job_config(folder: Path, config: PipelineConfig) -> None:
+    (folder / JOB_CONFIG).write_text(json.dumps(dataclasses.asdict(config)))
+
+
+def load_job_config(folder: Path, settings: ServiceSettings) -> PipelineConfig:
+    """The job's own config (saved at upload), else the service's."""
+    from pydantic import TypeAdapter
+
+    path = folder / JOB_CONFIG
+    if not path.is_file():
+        return settings.job
+    return TypeAdapter(PipelineConfig).validate_python(json.loads(path.read_text()))
 
 
 def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
@@ -115,7 +146,8 @@ def run_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
     folder = job_dir(settings, job_id)
     work, result = reset_folders(folder)
     report = ProgressReporter(JobStore(settings.db_path), job_id, run_token)
-    make_video(pipeline_input(folder), result / "video.mp4", video_settings(settings), work_dir=work,
+    make_video(pipeline_input(folder), result / "video.mp4", load_job_config(folder, settings),
+               work_dir=work,
                device=pick_device(settings.device), poster=str(result / "poster.jpg"),
                frames_dir=result / "frames", on_stage=report, show=False)
     shutil.rmtree(work, ignore_errors=True)  # the scene and the trained run: not served, and large

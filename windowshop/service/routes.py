@@ -6,6 +6,7 @@ Every refusal answers `{"error": code, "detail": message}` with a 4xx (or 503) s
 
 from __future__ import annotations
 
+import json
 import re
 import secrets
 import shutil
@@ -19,7 +20,10 @@ from starlette.exceptions import HTTPException
 from starlette.formparsers import MultiPartException
 
 from windowshop.service.db import DONE, FINISHED, QUEUED, Job, JobStore
-from windowshop.service.jobs import FRAME_NAME
+from windowshop.config import PipelineConfig
+from windowshop.errors import UserError
+from windowshop.overrides import leaves
+from windowshop.service.jobs import FRAME_NAME, job_config, save_job_config
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.uploads import UploadRefused, check_upload, copy_limited
 from windowshop.service.worker import job_dir
@@ -30,7 +34,11 @@ _MULTIPART = {"requestBody": {"required": True, "content": {"multipart/form-data
     "type": "object", "required": ["files"], "properties": {"files": {
         "type": "array", "items": {"type": "string", "format": "binary"},
         "description": "photos (JPEG, PNG, WebP), or one video, or one zip of photos or of a "
-                       "posed scene"}}}}}}}
+                       "posed scene"}, "settings": {
+        "type": "string", "description": "optional JSON object of this job's settings by dotted "
+        "path (budgets and sizes only lower than the service's), e.g. {\"render.frames\": 36}; "
+        "the settings: " + ", ".join(leaves(PipelineConfig)) + ", model_settings.<any field of the "
+        "model's config>"}}}}}}}
 
 
 class ApiError(Exception):
@@ -176,6 +184,7 @@ async def _receive_upload(request: Request, folder: Path, settings: ServiceSetti
                        "multipart field 'files'") from None
     uploads = form.getlist("files")
     try:
+        config = _upload_settings(form.get("settings"), settings)
         if any(isinstance(u, str) for u in uploads):
             raise ApiError(400, "bad_form", "the field 'files' must hold files, not text")
         (folder / "upload").mkdir(parents=True)
@@ -186,12 +195,30 @@ async def _receive_upload(request: Request, folder: Path, settings: ServiceSetti
             await run_in_threadpool(copy_limited, upload.file, dest, settings.max_file_bytes, repr(name))
             parts.append((dest, name))
         checked = await run_in_threadpool(check_upload, parts, folder, settings)
+        if config is not None:
+            save_job_config(folder, config)
     except UploadRefused as err:
         raise ApiError(err.status, err.code, err.message) from None
     finally:
         await form.close()
     shutil.rmtree(folder / "upload")
     return checked
+
+
+def _upload_settings(text, settings: ServiceSettings):
+    """The form's optional `settings`: a JSON object of overrides of the job's config."""
+    if text is None:
+        return None
+    try:
+        overrides = json.loads(text) if isinstance(text, str) else None
+        if not isinstance(overrides, dict):
+            raise ValueError
+        return job_config(settings, overrides)
+    except ValueError:
+        raise ApiError(422, "bad_settings", "the field 'settings' must be a JSON object of "
+                       'settings, e.g. {"render.frames": 36}') from None
+    except UserError as err:
+        raise ApiError(422, "bad_settings", str(err)) from None
 
 
 @router.get("/jobs/{job_id}", response_model=JobStatus, responses=_REFUSALS,

@@ -10,11 +10,14 @@ from pathlib import Path
 
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from windowshop.config import PipelineConfig
+
 
 class ServiceSettings(BaseSettings):
     """Settings of one service: its data folder, its upload limits and the jobs its worker runs."""
 
-    model_config = SettingsConfigDict(env_prefix="WINDOWSHOP_", frozen=True)
+    model_config = SettingsConfigDict(env_prefix="WINDOWSHOP_", env_nested_delimiter="__",
+                                      env_parse_none_str="none", frozen=True)
 
     data_dir: Path = Path("windowshop-data")  # jobs.sqlite3 and one folder per job
     host: str = "127.0.0.1"
@@ -36,15 +39,11 @@ class ServiceSettings(BaseSettings):
     poll_seconds: float = 0.5  # how often the worker looks at the queue and at cancellations
     device: str | None = None  # torch device of the jobs; None picks CUDA when present
 
-    # The job: knobs of windowshop.pipeline.VideoSettings; None keeps the pipeline's default.
-    model: str | None = None  # "fast" or "nerf"
-    preset: str | None = None  # a named setting of the model
-    train_seconds: float | None = None  # training time budget
-    train_steps: int | None = None  # or a number of training steps (either one replaces both)
-    train_side: int | None = None  # longer side of the training images, pixels
-    frames: int | None = None  # turntable frames, also the images of the drag-to-spin viewer
-    fps: float | None = None
-    frame_size: int | None = None  # the turntable is frame_size x frame_size pixels
+    # Every job's settings: the pipeline's (windowshop.config.PipelineConfig), each field an
+    # environment variable by its dotted path, e.g. WINDOWSHOP_JOB__FIT__SECONDS=20,
+    # WINDOWSHOP_JOB__RENDER__FRAMES=36 (the turntable's frames are also the drag-to-spin viewer's
+    # images), WINDOWSHOP_JOB__MODEL=nerf ("none" for None), or the whole as JSON in WINDOWSHOP_JOB.
+    job: PipelineConfig = PipelineConfig()
 
     @property
     def db_path(self) -> Path:

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import torch
 
-from windowshop.study.grids import budget_overrides, load_grid, parse_assignments
+from windowshop.overrides import parse_assignments
+from windowshop.study.grids import budget_overrides, load_grid
 from windowshop.study.report import REPORT
 from windowshop.study.runner import ResultRow, run_study
 

@@ -230,16 +230,3 @@ def budget_overrides(iters: int | None, seconds: float | None) -> dict[str, Any]
             raise UserError(f"--seconds must be positive, got {seconds}")
         return {"iters": None, "seconds": seconds}
     return {}
-
-
-def parse_assignments(items: list[str]) -> dict[str, Any]:
-    """`--set KEY=VALUE` items as switches; values read as YAML scalars (10, 0.5, true, nerf)."""
-    import yaml
-
-    settings = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UserError(f"--set {item!r}: expected KEY=VALUE, e.g. --set batch_rays=1024")
-        settings[key.strip().replace("-", "_")] = yaml.safe_load(value) if value.strip() else None
-    return settings

@@ -17,8 +17,6 @@ import functools
 import json
 import os
 import platform
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -26,7 +24,7 @@ from typing import Any, Callable
 import torch
 from PIL import Image
 
-from windowshop.config import FitConfig, SceneOptions
+from windowshop.config import FitConfig, RunConfig, SceneOptions
 from windowshop.errors import UserError
 from windowshop.study.grids import Combination, Grid
 
@@ -93,62 +91,18 @@ class StudyInfo:
     command: str = ""
 
 
-def _check_value(key: str, value: Any, hint: Any, where: str) -> Any:
-    """`value` of switch `key` checked against the field's type `hint`; ints become floats, lists
-    tuples."""
-    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
-    kinds = [typing.get_origin(k) or k for k in (typing.get_args(hint) if union else (hint,))]
-    if value is None:
-        if type(None) in kinds:
-            return None
-        raise UserError(f"{where}: switch {key} needs a value")
-    expected = next((k for k in (bool, int, float, str, tuple) if k in kinds), None)
-    ok = {bool: lambda v: isinstance(v, bool),
-          int: lambda v: isinstance(v, int) and not isinstance(v, bool),
-          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
-          str: lambda v: isinstance(v, str), tuple: lambda v: isinstance(v, (list, tuple))}
-    if expected is not None and not ok[expected](value):
-        names = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
-                 tuple: "a list"}
-        raise UserError(f"{where}: switch {key} must be {names[expected]}, got {value!r}")
-    return float(value) if expected is float else tuple(value) if expected is tuple else value
-
-
-def _take(settings: dict[str, Any], cls: type, where: str) -> dict[str, Any]:
-    """Remove and return the switches that are fields of the dataclass `cls`, checked."""
-    hints = typing.get_type_hints(cls)
-    return {key: _check_value(key, settings.pop(key), hints[key], where)
-            for key in list(settings) if key in hints}
-
-
 def resolve(settings: dict[str, Any], where: str) -> RunSettings:
-    """Sort a combination's switches into model, preset, scene options, fit and model config.
+    """Sort a combination's switches into model, preset, scene options, fit and model config (as
+    `windowshop fit` does, windowshop.model.apply_run_overrides); a switch that none of them has
+    is a UserError naming `where` (the combination)."""
+    from windowshop.model import apply_run_overrides, model_config
 
-    A switch that none of them has is a UserError naming `where` (the combination).
-    """
-    from windowshop.fit.command import build_model_config
-    from windowshop.model import model_class
-
-    settings = dict(settings)
-    model = str(settings.pop("model", DEFAULT_MODEL))
-    preset = settings.pop("preset", None)
-    scene_options = SceneOptions(**_take(settings, SceneOptions, where))
-    fit = _take(settings, FitConfig, where)
-    if fit.get("seconds") is not None and "iters" not in fit:
-        fit["iters"] = None  # a time budget alone replaces the default step budget, as in `fit`
-    fit_config = FitConfig(**fit)
-    if not fit_config.iters and not fit_config.seconds:
+    settings = {"model": DEFAULT_MODEL, **settings}
+    config = apply_run_overrides(RunConfig(), settings, where)
+    if not config.fit.iters and not config.fit.seconds:
         raise UserError(f"{where}: no training budget; give iters or seconds (or --iters/--seconds)")
-    try:
-        config_type = model_class(model).config_type
-    except ValueError as err:
-        raise UserError(f"{where}: {err}") from None
-    checked = _take(settings, config_type, where)
-    try:
-        model_config = build_model_config(model, preset, {**settings, **checked})
-    except UserError as err:  # a switch no part of `fit` has, or an unknown preset
-        raise UserError(f"{where}: {err}") from None
-    return RunSettings(model, preset, model_config, fit_config, scene_options)
+    model = model_config(config.model, config.preset, **config.model_settings)
+    return RunSettings(config.model, config.preset, model, config.fit, config.scene)
 
 
 def cpu_model() -> str:
@@ -302,7 +256,6 @@ def run_combination(combo: Combination, scene_path: str | Path, study_dir: str |
             (run_dir / LOG).unlink()  # lines of an attempt that never reached a checkpoint
         try:
             metrics = fit(scene, spec.model, spec.model_config, spec.fit_config, run_dir, device,
-                          scene_options=spec.scene_options,
                           resume=run_dir if state == "partial" else None, show_progress=show_progress)
         except UserError as err:  # e.g. Ctrl-C, after fit checkpointed the run
             raise UserError(f"combination {combo.folder}: {err} (running the same study command "

@@ -9,7 +9,7 @@ import torch
 import torch.nn.functional as F
 
 from test_fit import TINY, look_at, toy_scene
-from windowshop.config import FastConfig, FitConfig, NerfConfig
+from windowshop.config import FastConfig, FitConfig
 from windowshop.field import kernels
 from windowshop.field.fast import FastModel, lattice_shape
 from windowshop.field.nerf import NerfModel

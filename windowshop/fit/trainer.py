@@ -111,9 +111,9 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
     virtual = None
-    if any(term.virtual for term in losses):
-        cameras = virtual_cameras or _orbit([v.camera for v in train_views])
-        virtual = CameraRays(list(cameras), device, seed=fit_config.seed + progress.step)
+    if any(term.virtual for term in losses):  # only then: the orbit is fitted to the cameras
+        virtual = CameraRays(list(virtual_cameras or _orbit([v.camera for v in train_views])),
+                             device, seed=fit_config.seed + progress.step)
     run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress, callbacks,
                       losses=losses, virtual=virtual)
     write_config(out_dir, model_name, model_config, fit_config, run.record)

@@ -8,8 +8,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from test_fit import TINY, look_at, toy_scene
-from windowshop.config import FastConfig, FitConfig
+from windowshop.config import FastConfig, FitConfig, NerfConfig
 from windowshop.field import kernels
 from windowshop.field.fast import FastModel, lattice_shape
 from windowshop.field.nerf import NerfModel
@@ -21,9 +20,16 @@ from windowshop.fit.trainer import fit
 from windowshop.model import Bounds, RenderOutput
 from windowshop.render.composite import composite
 from windowshop.render.sampling import stratified
+from windowshop.scene.cameras import look_at
+from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.types import Camera
 
 BOUNDS = Bounds(aabb=((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)), near=1.5, far=4.5)
+TINY = NerfConfig(freqs=2, view_dependent=False, depth=2, width=16, n_coarse=8, n_fine=0)
+
+
+def toy_scene():
+    return synthetic_scene(n_train=4, n_test=1, size=12)
 
 
 def test_progress_is_reported_every_step_and_ends_at_one(tmp_path):
@@ -196,7 +202,8 @@ def test_a_checkpoint_from_before_the_grid_rename_loads():
 
 def test_a_loss_term_gets_rays_from_cameras_without_photos(tmp_path):
     eye = np.array([0.0, -3.0, 0.5])
-    camera = Camera(fx=20.0, fy=20.0, cx=10.0, cy=10.0, width=20, height=20, c2w=look_at(eye))
+    camera = Camera(fx=20.0, fy=20.0, cx=10.0, cy=10.0, width=20, height=20,
+                    c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0])))
     seen = []
 
     def probe(inp: LossInput) -> torch.Tensor:

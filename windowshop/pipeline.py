@@ -13,16 +13,13 @@ from __future__ import annotations
 import json
 import shutil
 import sys
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
-from windowshop.config import FitConfig, PipelineConfig
+from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
 from windowshop.photos.progress import StageCallback
 
@@ -50,37 +47,6 @@ def is_posed_scene(path: Path) -> bool:
     return True
 
 
-def _fit_fraction(line: str, config: FitConfig) -> float:
-    stats = json.loads(line)
-    parts = [stats["step"] / config.iters if config.iters else 0.0,
-             stats["elapsed"] / config.seconds if config.seconds else 0.0]
-    return min(max(parts), 1.0)
-
-
-@contextmanager
-def _watch_fit(log: Path, config: FitConfig, on_stage: StageCallback | None) -> Iterator[None]:
-    """Report the fit's progress from its log.jsonl (the trainer takes no callback) every 0.5 s,
-    from a helper thread."""
-    stop = threading.Event()
-
-    def poll() -> None:
-        while not stop.wait(0.5):
-            lines = log.read_text().splitlines() if log.is_file() else []
-            if lines and on_stage is not None:
-                try:
-                    on_stage("fit", _fit_fraction(lines[-1], config))
-                except ValueError:  # a line being written
-                    pass
-
-    thread = threading.Thread(target=poll, daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join()
-
-
 def _work_dir(work: Path) -> Path:
     """An empty work folder; an earlier make_video's (holding MARKER) is replaced."""
     if work.exists() and any(work.iterdir()):
@@ -103,9 +69,10 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     `work_dir` (default: `<out stem>_work` beside the MP4) keeps the posed scene (`scene/`) and
     the trained run (`run/`). `poster` writes the first frame beside the MP4 (True) or to a path;
     `frames_dir` also writes every frame as a JPEG there. `on_stage(stage, fraction)` is called
-    with stage "prepare" (skipped for a posed scene), "fit" and "render" as each advances (during
-    the fit from a helper thread). Prints each stage and its time when `show`.
+    with stage "prepare" (skipped for a posed scene), "fit" (after every training step) and "render"
+    as each advances. Prints each stage and its time when `show`.
     """
+    from windowshop.fit.callbacks import FitCallbacks
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.photos.prepare import prepare
@@ -136,9 +103,8 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     report("fit", 0.0)
     scene = load_scene(scene_dir, config.scene)
     model = model_config(config.model, config.preset, **config.model_settings)
-    with _watch_fit(work / "run" / "log.jsonl", config.fit, on_stage):
-        metrics = fit(scene, config.model, model, config.fit, work / "run", device,
-                      show_progress=show)
+    metrics = fit(scene, config.model, model, config.fit, work / "run", device, show_progress=show,
+                  callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
 
     start = time.perf_counter()

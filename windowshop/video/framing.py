@@ -1,11 +1,13 @@
-"""Framing the object's box: how far away, and how zoomed, each turntable camera is.
+"""Framing the object's box: how far away, and how zoomed, the turntable's cameras are.
 
-Each frame looks at the box's centre from a fixed direction; along that direction the camera's
-distance sets how large the box's projection is. The distance is solved per frame so that the
-projected box (its eight corners, not a bounding sphere: a long object seen end-on is narrow)
-fills `target` of the frame on its larger axis, width or height. The model only renders between
-the run's `near` and `far`, so the distance stays where the whole box lies in that range; where
-that stops the camera short of the target, the focal length makes up the difference.
+Each frame looks at the box's centre from its own direction. The projected box (its eight
+corners, not a bounding sphere: a long object seen end-on is narrow) should fill `target` of the
+frame on its larger axis, width or height, in every frame. One distance serves the whole path, so
+the camera circles at a constant distance like a real turntable and the perspective never
+changes: the distance at which the widest view, with the given focal length, fills `target`. The
+model only renders between the run's `near` and `far`, so the distance stays where the whole box
+lies in that range. Each frame's focal length then zooms to exactly `target` (the widest view
+keeps the given one), and never so far that a corner leaves the frame.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from windowshop.scene.cameras import look_at
 
 FILL = 0.8  # fraction of the frame the box's projection spans on its larger axis
 INSIDE = 0.98  # no corner comes nearer the frame's edge than this fraction of the half-frame
+MIN_DISTANCE = 3.0  # times the box's bounding radius: nearer, perspective swells its near end
 BISECTIONS = 60  # halvings of the distance interval: far below a pixel
 
 
@@ -84,7 +87,7 @@ def frame_box(aabb, centre: np.ndarray, up: np.ndarray, directions: np.ndarray, 
               height: int, focal: float, distance: float | None = None, zoom: bool = True,
               depth_range: tuple[float, float] | None = None,
               target: float = FILL) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (F,) from `centre` and focal lengths (F,) in pixels that frame the box `aabb`.
+    """Distances (F,, all equal) from `centre` and focal lengths (F,) in pixels that frame `aabb`.
 
     Cameras sit on unit `directions` (F, 3) from `centre` (3,), looking at it, upright about `up`.
     `distance` fixes every camera's distance instead of solving it; `zoom=False` keeps `focal`
@@ -103,10 +106,12 @@ def frame_box(aabb, centre: np.ndarray, up: np.ndarray, directions: np.ndarray, 
         hi = lo * (2.0 + 4.0 * focal / min(width, height) / target)  # the box spans < target here
         distances = smallest_distance(
             lambda d: projected_extent(local, d, focals, width, height)[0] <= target, lo, hi)
+        distance = max(distances.max(), MIN_DISTANCE * lo[0])
         if depth_range is not None:
             closest, farthest = depth_limits(corners, centre, directions, *depth_range, lo, 10 * hi)
             # Keeping the front unclipped matters more than the back if both cannot hold.
-            distances = np.maximum(np.minimum(distances, farthest), closest)
+            distance = max(min(distance, farthest.min()), closest.max())
+        distances = np.full(frames, distance)
     in_front = (distances[:, None] > local[..., 2]).all(axis=1)
     if zoom:
         fill, reach = projected_extent(local, distances, focals, width, height)

@@ -178,3 +178,16 @@ def test_best_covered_frame_prefers_the_dense_cluster_to_a_lone_camera():
     assert frames[best_covered_frame(frames, cameras)] == 90.0
     wrap = np.array([355.0, 358.0, 2.0, 4.0, 180.0])
     assert frames[best_covered_frame(frames, wrap)] == 0.0
+
+
+def test_the_scenes_up_axis_keeps_photos_taken_sideways_upright():
+    train = ring(np.arange(0, 360, 30))
+    for cam in train:  # every photo rolled a quarter turn: their right axes all point up
+        cam.c2w[:3, :2] = np.stack([cam.c2w[:3, 1], -cam.c2w[:3, 0]], axis=1)
+    plan = plan_turntable(train, VideoOptions(frames=8, width=32, height=32),
+                          Bounds(aabb=((-1,) * 3, (1,) * 3), near=WIDE[0], far=WIDE[1]),
+                          up=np.array([0.0, 0.0, 1.0]))
+    for cam in plan.cameras:
+        np.testing.assert_allclose(cam.c2w[2, 0], 0.0, atol=1e-9)  # level: right is horizontal
+        assert cam.c2w[2, 1] > 0.5  # the camera's up leans towards +z
+    assert not plan.swing  # azimuths about +z: the ring all round

@@ -3,8 +3,9 @@
 Every path yields `windowshop.scene.types.Camera`s (OpenGL camera-to-world) in the run's normalised
 frame. The orbit keeps the object centred, upright and framed for any capture:
 - centre: the centre of the object's box (the run's `aabb`),
-- up: the direction most perpendicular to every camera's x (right) axis, since photos are taken
-  with the camera level; the average camera up when the right axes do not span a plane,
+- up: the scene's own (+z of a normalised scene, found from the support plane or the cameras when
+  it was loaded), else the direction most perpendicular to every camera's x (right) axis, since
+  photos are taken with the camera level; the average camera up when those do not span a plane,
 - elevation: the median of the training views; field of view: their median, on the narrower side,
 - distance: per frame, so the box's projection fills 80% of the frame (`windowshop.video.framing`),
 - azimuths: a full turn from the first training camera (plus `start_angle`) when the photos cover
@@ -103,10 +104,12 @@ def vertical_fov(camera: Camera) -> float:
     return math.degrees(2 * math.atan(camera.height / (2 * camera.fy)))
 
 
-def fit_orbit(cameras: list[Camera], centre: np.ndarray | None = None) -> Orbit:
+def fit_orbit(cameras: list[Camera], centre: np.ndarray | None = None,
+              up: np.ndarray | None = None) -> Orbit:
     """The orbit of the training `cameras`: their centre, up axis and median radius/elevation.
 
-    `centre` (3,) replaces the point the cameras look at (the object's box centre, when known).
+    `centre` (3,) replaces the point the cameras look at (the object's box centre, when known),
+    the unit `up` (3,) the up axis fitted to them (the scene's own, when known).
     `fov` is the median of each camera's narrower field of view; the turntable gives it to its own
     narrower side, so whatever the photos kept in frame stays in frame.
     """
@@ -116,7 +119,7 @@ def fit_orbit(cameras: list[Camera], centre: np.ndarray | None = None) -> Orbit:
     origins, forwards = c2ws[:, :3, 3], -c2ws[:, :3, 2]
     if centre is None:
         centre = nearest_point_to_axes(origins, forwards, prior=np.zeros(3))
-    up = fit_up(c2ws)
+    up = fit_up(c2ws) if up is None else _unit(np.asarray(up, dtype=np.float64))
     offsets = origins - centre
     dist = np.linalg.norm(offsets, axis=1)
     elev = np.degrees(np.arcsin(np.clip(offsets @ up / np.maximum(dist, 1e-12), -1, 1)))
@@ -220,12 +223,16 @@ def _framed_path(orbit: Orbit, azimuths: np.ndarray, options: VideoOptions, boun
     return orbit_cameras(orbit, azimuths, elevations, width, height, distances, focals)
 
 
-def plan_turntable(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds) -> TurntablePlan:
+def plan_turntable(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds,
+                   up: np.ndarray | None = None) -> TurntablePlan:
     """The turntable `options` describe (orbit, spiral or a camera-path file) around the object
-    in `bounds` (its box, and the near/far the model renders within), and its coverage."""
+    in `bounds` (its box, and the near/far the model renders within), and its coverage.
+
+    `up` (3,) is the scene's up axis; None fits one to the cameras.
+    """
     _check(options)
     centre = np.asarray(bounds.aabb, dtype=np.float64).mean(0)
-    orbit = fit_orbit(train_cameras, centre=centre)
+    orbit = fit_orbit(train_cameras, centre=centre, up=up)
     seen = orbit.azimuths(np.stack([c.center for c in train_cameras]))
     start, span = coverage.covered_arc(seen)
     swing = options.path in ("orbit", "spiral") and span < coverage.FULL_TURN_SPAN and not options.full_turn
@@ -241,9 +248,10 @@ def plan_turntable(train_cameras: list[Camera], options: VideoOptions, bounds: B
                          covered_span=span, poster_frame=poster)
 
 
-def turntable_path(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds) -> list[Camera]:
+def turntable_path(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds,
+                   up: np.ndarray | None = None) -> list[Camera]:
     """The cameras of the turntable `options` describe around the object in `bounds`."""
-    return plan_turntable(train_cameras, options, bounds).cameras
+    return plan_turntable(train_cameras, options, bounds, up).cameras
 
 
 def write_camera_path(cameras: list[Camera], path: str | Path, fps: float = 30.0) -> Path:

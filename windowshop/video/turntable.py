@@ -27,6 +27,7 @@ from windowshop.scene.types import Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
 from windowshop.video.paths import plan_turntable, write_camera_path
 
+NORMALISED_UP = (0.0, 0.0, 1.0)  # a normalised scene's up axis (SceneOptions.normalize)
 RENDER_SUMMARY = "render.json"  # in the run folder: the last turntable's path and coverage
 BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0),
                "transparent": (0.0, 0.0, 0.0)}  # rendered over black: colour premultiplied by alpha
@@ -117,7 +118,8 @@ def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs
     if options.background not in BACKGROUNDS:
         raise UserError(f"--background must be one of {', '.join(BACKGROUNDS)}, got {options.background!r}")
     run = load_run(run_dir, device)
-    plan = plan_turntable(run.train_cameras, options, run.bounds)
+    up = np.array(NORMALISED_UP) if run.scene_options.normalize else None  # else fit to the cameras
+    plan = plan_turntable(run.train_cameras, options, run.bounds, up)
     poster = plan.poster_frame if outputs.poster_frame is None else outputs.poster_frame
     outputs = dataclasses.replace(outputs, poster_frame=poster,
                                   transparent=options.background == "transparent")

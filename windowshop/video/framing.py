@@ -83,38 +83,50 @@ def depth_limits(corners: np.ndarray, centre: np.ndarray, directions: np.ndarray
     return smallest_distance(clear_of_near, lo, hi), smallest_distance(past_far, lo, hi)
 
 
+def orbit_distance(local: np.ndarray, corners: np.ndarray, centre: np.ndarray,
+                   directions: np.ndarray, width: int, height: int, focal: float,
+                   depth_range: tuple[float, float] | None, target: float) -> float:
+    """The one distance from `centre` at which the widest view fills `target` with `focal`, no
+    nearer than `MIN_DISTANCE` box radii, moved into `depth_range` where the box must be.
+
+    `local` (F, 8, 3) are `corners` (8, 3) in each view's axes about `centre` (see
+    `projected_extent`); `directions` (F, 3) are the unit directions of the views from it.
+    """
+    frames = len(directions)
+    lo = np.full(frames, 1.0001 * np.linalg.norm(corners - centre, axis=1).max())  # outside the box
+    hi = lo * (2.0 + 4.0 * focal / min(width, height) / target)  # the box spans < target here
+    focals = np.full(frames, float(focal))
+    fits = smallest_distance(lambda d: projected_extent(local, d, focals, width, height)[0] <= target,
+                             lo, hi)
+    distance = max(fits.max(), MIN_DISTANCE * lo[0])
+    if depth_range is not None:
+        closest, farthest = depth_limits(corners, centre, directions, *depth_range, lo, 10 * hi)
+        # Keeping the front unclipped matters more than the back if both cannot hold.
+        distance = max(min(distance, farthest.min()), closest.max())
+    return float(distance)
+
+
 def frame_box(aabb, centre: np.ndarray, up: np.ndarray, directions: np.ndarray, width: int,
               height: int, focal: float, distance: float | None = None, zoom: bool = True,
               depth_range: tuple[float, float] | None = None,
               target: float = FILL) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (F,, all equal) from `centre` and focal lengths (F,) in pixels that frame `aabb`.
+    """Distances (F,) (all equal) from `centre` and focal lengths (F,) in pixels framing `aabb`.
 
     Cameras sit on unit `directions` (F, 3) from `centre` (3,), looking at it, upright about `up`.
-    `distance` fixes every camera's distance instead of solving it; `zoom=False` keeps `focal`
-    (the user's field of view) instead of making up for a fixed or limited distance;
-    `depth_range` (near, far) is the model's: the whole box stays within it where it can.
+    `distance` fixes the distance instead of solving it; `zoom=False` keeps `focal` (the user's
+    field of view) instead of zooming each frame to `target`; `depth_range` (near, far) is the
+    model's: the whole box stays within it where it can.
     """
     corners = box_corners(aabb)
-    rotations = view_rotations(directions, up)
-    local = np.einsum("fji,kj->fki", rotations, corners - centre)  # (F, 8, 3): R^T (p - c)
-    frames = len(directions)
-    focals = np.full(frames, float(focal))
-    if distance is not None:
-        distances = np.full(frames, float(distance))
-    else:
-        lo = np.full(frames, 1.0001 * np.linalg.norm(corners - centre, axis=1).max())  # outside the box
-        hi = lo * (2.0 + 4.0 * focal / min(width, height) / target)  # the box spans < target here
-        distances = smallest_distance(
-            lambda d: projected_extent(local, d, focals, width, height)[0] <= target, lo, hi)
-        distance = max(distances.max(), MIN_DISTANCE * lo[0])
-        if depth_range is not None:
-            closest, farthest = depth_limits(corners, centre, directions, *depth_range, lo, 10 * hi)
-            # Keeping the front unclipped matters more than the back if both cannot hold.
-            distance = max(min(distance, farthest.min()), closest.max())
-        distances = np.full(frames, distance)
-    in_front = (distances[:, None] > local[..., 2]).all(axis=1)
+    local = np.einsum("fji,kj->fki", view_rotations(directions, up), corners - centre)  # R^T (p - c)
+    if distance is None:
+        distance = orbit_distance(local, corners, centre, directions, width, height, focal,
+                                  depth_range, target)
+    distances = np.full(len(directions), float(distance))
+    focals = np.full(len(directions), float(focal))
     if zoom:
         fill, reach = projected_extent(local, distances, focals, width, height)
         scale = np.minimum(target / np.maximum(fill, 1e-12), INSIDE / np.maximum(reach, 1e-12))
+        in_front = (distances[:, None] > local[..., 2]).all(axis=1)  # a too-short --radius
         focals = np.where(in_front, focals * scale, focals)
     return distances, focals

@@ -6,8 +6,10 @@ frame. The orbit keeps the object centred, upright and framed for any capture:
 - up: the scene's own (+z of a normalised scene, found from the support plane or the cameras when
   it was loaded), else the direction most perpendicular to every camera's x (right) axis, since
   photos are taken with the camera level; the average camera up when those do not span a plane,
-- elevation: the median of the training views; field of view: their median, on the narrower side,
-- distance: per frame, so the box's projection fills 80% of the frame (`windowshop.video.framing`),
+- elevation: the median of the training views,
+- distance and zoom: one distance all round, and each frame's focal length, so the box's projection
+  fills 80% of every frame; the widest view keeps the photos' median field of view
+  (`windowshop.video.framing`),
 - azimuths: a full turn from the first training camera (plus `start_angle`) when the photos cover
   at least 300 degrees about the up axis, else a swing across the covered arc and back
   (`windowshop.video.coverage`), so the video never shows a side nobody photographed.

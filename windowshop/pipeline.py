@@ -34,6 +34,8 @@ class VideoResult:
     run_dir: Path
     seconds: dict[str, float]  # stage -> seconds
     metrics: dict  # the fit's held-out metrics
+    report: dict  # the capture's quality report (windowshop.quality), also at report_path
+    report_path: Path
 
 
 def is_posed_scene(path: Path) -> bool:
@@ -67,8 +69,9 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     every stage set by `config`.
 
     `work_dir` (default: `<out stem>_work` beside the MP4) keeps the posed scene (`scene/`) and
-    the trained run (`run/`). `poster` writes the first frame beside the MP4 (True) or to a path;
-    `frames_dir` also writes every frame as a JPEG there. `on_stage(stage, fraction)` is called
+    the trained run (`run/`). `poster` writes the best-covered frame beside the MP4 (True) or to a
+    path; `frames_dir` also writes every frame as a JPEG (PNG with alpha when transparent) there.
+    The capture's quality report goes beside the video (`<stem>_report.json`, `<stem>_coverage.png`). `on_stage(stage, fraction)` is called
     with stage "prepare" (skipped for a posed scene), "fit" (after every training step) and "render"
     as each advances. Prints each stage and its time when `show`.
     """
@@ -78,10 +81,12 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     from windowshop.photos.prepare import prepare
     from windowshop.scene import load_scene
     from windowshop.video.turntable import default_outputs, render_run
+    from windowshop.quality import quality_report, summary_lines, write_quality_report
 
     source, out_mp4 = Path(source), Path(out_mp4)
     if not source.exists():
         raise UserError(f"{source}: no such file or folder")
+    check_output(out_mp4, config.render.background)
     work = _work_dir(Path(work_dir) if work_dir else out_mp4.with_name(f"{out_mp4.stem}_work"))
     out_mp4.parent.mkdir(parents=True, exist_ok=True)
     report = on_stage or (lambda stage, fraction: None)
@@ -109,15 +114,35 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
 
     start = time.perf_counter()
     report("render", 0.0)
-    outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, frames_format="jpg")
-    render_run(work / "run", config.render, outputs, device, progress=show,
-               on_frame=lambda k, n: report("render", k / n))
+    transparent = config.render.background == "transparent"
+    outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, transparent=transparent,
+                              frames_format="png" if transparent else "jpg")
+    rendered = render_run(work / "run", config.render, outputs, device, progress=show,
+                          on_frame=lambda k, n: report("render", k / n))
     done("render", start)
 
+    quality = quality_report(scene, metrics, rendered.path, _prepare_report(scene_dir, source))
+    report_path, _ = write_quality_report(out_mp4.with_name(f"{out_mp4.stem}_report.json"), quality)
     result = VideoResult(mp4=out_mp4, poster=outputs.poster, scene_dir=Path(scene_dir),
-                         run_dir=work / "run", seconds=seconds, metrics=metrics)
+                         run_dir=work / "run", seconds=seconds, metrics=metrics, report=quality,
+                         report_path=report_path)
     (work / MARKER).write_text(json.dumps({**asdict(result), "config": asdict(config)},
                                           indent=2, default=str))
     if show:
-        print(f"wrote {out_mp4} in {sum(seconds.values()):.0f} s", file=sys.stderr)
+        print("\n".join(summary_lines(quality)), file=sys.stderr)
+        print(f"wrote {out_mp4} and {report_path.name} in {sum(seconds.values()):.0f} s",
+              file=sys.stderr)
     return result
+
+
+def _prepare_report(scene_dir: Path, source: Path) -> dict | None:
+    """What prepare said of the photos (None when the input was already a posed scene)."""
+    path = Path(scene_dir) / "report.json"
+    return json.loads(path.read_text()) if Path(scene_dir) != source and path.is_file() else None
+
+
+def check_output(out: Path, background: str) -> None:
+    """Refuse, before any work, a video file that cannot hold what was asked."""
+    if (background == "transparent") != (out.suffix.lower() == ".webm"):
+        raise UserError(f"{out}: a transparent turntable is written as .webm (VP9 with alpha), "
+                        f"any other as .mp4; name the output accordingly")

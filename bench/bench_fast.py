@@ -132,7 +132,7 @@ def race(scene, seconds: float, args, device: torch.device, nerf: bool = True) -
     full = evaluate_views(model, held_out_views(scene), scene.background)
     fast.update(psnr=round(full["psnr"], 3), ssim=round(full["ssim"], 4),
                 eval_seconds=round(time.perf_counter() - start, 2), voxels=model.config.voxels,
-                grid=list(model.density.shape))
+                grid=list(model.grid_shape))
     row = {"train_views": len(scene.split("train")), "test_views": full["test_views"],
            "seconds": seconds, "fast": fast}
     if nerf and not args.no_nerf:  # fewer probes: each costs the NeRF seconds

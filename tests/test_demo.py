@@ -45,7 +45,8 @@ def test_demo_turntable_matches_the_true_frames_of_its_orbit(demo_dir):
     _, decoded = read_video(demo_dir / "turntable.mp4")
     frames = [f.astype(np.float32) / 255.0 for f in decoded]
     run = load_run(demo_dir / "run")
-    cameras = turntable_path(run.train_cameras, VideoOptions(frames=FRAMES, width=SIZE, height=SIZE))
+    cameras = turntable_path(run.train_cameras, VideoOptions(frames=FRAMES, width=SIZE, height=SIZE),
+                             run.bounds)
     truths = [render_truth(camera)[0] for camera in cameras]  # the object over white
     scores = [psnr(frame, truth) for frame, truth in zip(frames, truths)]
     assert min(scores) >= MIN_FRAME_PSNR, scores

@@ -98,6 +98,11 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     assert after[2] != before[2]  # the picture itself changed, not only the attribute
 
     assert page.is_visible("#download") and page.get_attribute("#download", "href").endswith("video.mp4")
+    # the capture's quality report: what was placed and covered, the coverage plot
+    wait_js(page, "document.getElementById('quality-summary').textContent.includes('photos placed')")
+    assert "of the circle covered" in page.inner_text("#quality-summary")
+    wait_js(page, "document.getElementById('coverage').complete"
+                  " && document.getElementById('coverage').naturalWidth > 100")
     assert job_id in page.get_attribute(f"#my-jobs a[href='/jobs/{job_id}']", "href")
     page.screenshot(path=str(ARTIFACTS / "e2e-desktop.png"), full_page=True)
     page.close()

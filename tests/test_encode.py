@@ -104,3 +104,41 @@ def test_turntable_writer_writes_every_output(tmp_path):
     frames = sorted((tmp_path / "frames").glob("frame_*.jpg"))
     assert [f.name for f in frames] == [f"frame_{k:04d}.jpg" for k in range(count)]
     assert Image.open(frames[0]).size == (width, height)
+
+
+def disc(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """A red disc's frame rendered over black (colour premultiplied by alpha) and its alpha (H, W)."""
+    rows, cols = np.mgrid[0:height, 0:width] + 0.5
+    alpha = (np.hypot(rows - height / 2, cols - width / 2) < height / 3).astype(np.float32)
+    return alpha[..., None] * np.array([0.9, 0.2, 0.1], dtype=np.float32), alpha
+
+
+def test_a_transparent_turntable_keeps_its_alpha_in_the_webm_and_the_pngs(tmp_path):
+    width, height, count = 32, 24, 4
+    outputs = VideoOutputs(webm=tmp_path / "spin.webm", poster=tmp_path / "poster.jpg",
+                           frames_dir=tmp_path / "frames", transparent=True)
+    rgb, alpha = disc(width, height)
+    with TurntableWriter(outputs, width, height, fps=10.0) as writer:
+        for _ in range(count):
+            writer.add(rgb, np.zeros((height, width)), alpha)
+    # Decoded independently of our reader; ffmpeg's own VP9 decoder would drop the alpha plane.
+    reader = imageio_ffmpeg.read_frames(str(outputs.webm), pix_fmt="rgba", bpp=4,
+                                        input_params=["-c:v", "libvpx-vp9"])
+    meta = next(reader)
+    frames = [np.frombuffer(b, dtype=np.uint8).reshape(height, width, 4) for b in reader]
+    assert meta["codec"] == "vp9" and meta["pix_fmt"].startswith("yuva420p") and len(frames) == count
+    for frame in frames:
+        assert frame[12, 16, 3] > 245 and frame[0, 0, 3] < 10 and frame[-1, -1, 3] < 10
+        assert frame[12, 16, 0] > 200 and frame[12, 16, 1] < 80  # straight colour: the disc's red
+    png = np.asarray(Image.open(tmp_path / "frames" / "frame_0000.png"))
+    assert png.shape == (height, width, 4)
+    np.testing.assert_array_equal(png[..., 3], to_uint8(alpha[..., None])[..., 0])  # PNG: exact
+    assert tuple(png[12, 16, :3]) == (230, 51, 26)
+    poster = np.asarray(Image.open(outputs.poster))  # a JPEG has no alpha: over white
+    assert poster.shape == (height, width, 3) and poster[0, 0].min() > 245
+
+
+def test_a_transparent_mp4_is_refused(tmp_path):
+    with pytest.raises(UserError, match="webm"):
+        TurntableWriter(VideoOutputs(mp4=tmp_path / "v.mp4", transparent=True), 16, 16, 10.0)
+    assert not (tmp_path / "v.mp4").exists()

@@ -8,6 +8,8 @@ import torch
 from windowshop.config import FastConfig, FitConfig
 from windowshop.field import kernels
 from windowshop.field.fast import FastModel, pixel_footprint, spherical_harmonics
+from windowshop.fit.losses import LossInput, loss_terms, total_loss
+from windowshop.fit.schedule import StepInfo, schedule_for
 from windowshop.fit.trainer import fit
 from windowshop.model import Bounds, model_config
 from windowshop.rays import camera_rays
@@ -28,6 +30,9 @@ def trained(scene, steps=40, **overrides):
     config = FastModel.for_scene(FastConfig(occupancy_warmup=10, occupancy_every=5, **overrides), scene)
     model = FastModel(config, Bounds.of_scene(scene))
     optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    schedule, losses = schedule_for(model), loss_terms(config)
     views = scene.split("train")
     rays = [camera_rays(v.camera) for v in views]
     origins = torch.cat([o for o, _ in rays])
@@ -35,11 +40,12 @@ def trained(scene, steps=40, **overrides):
     target = torch.cat([torch.from_numpy(v.image.reshape(-1, 3)) for v in views])
     white = torch.ones(1024, 3)
     for step in range(steps):
-        model.before_step(step, step / steps)
+        for hook in schedule:
+            hook.before_step(StepInfo(model, optimizer, step, step / steps))
         pick = torch.randint(len(origins), (1024,))
         out = model.render_rays(origins[pick], directions[pick], white)
         optimizer.zero_grad()
-        model.loss(out, target[pick]).backward()
+        total_loss(losses, LossInput(model, out, target[pick], white)).backward()
         optimizer.step()
     return model.eval()
 
@@ -64,15 +70,15 @@ def test_spherical_harmonics_are_orthonormal_on_the_sphere():
 def test_grids_grow_and_empty_space_is_skipped(scene):
     model = trained(scene)
     config = model.config
-    assert model.density.shape == model.target_shape(1.0)
-    assert model.density.numel == pytest.approx(config.voxels, rel=0.15)
+    assert model.grid_shape == model.lattice(1.0)
+    assert model.density_grid.numel == pytest.approx(config.voxels, rel=0.15)
     assert 0.0 < model.occupancy.fraction() < 0.8  # the object fills much of its tight box
 
 
 def test_a_checkpoint_rebuilds_the_same_model(scene):
     model = trained(scene, steps=25)
     fresh = FastModel(model.config, model.bounds)
-    assert fresh.density.shape != model.density.shape  # it starts coarse ...
+    assert fresh.grid_shape != model.grid_shape  # it starts coarse ...
     fresh.load_state_dict(model.state_dict())  # ... and takes the checkpoint's shapes
     fresh.eval()
     origins, directions = camera_rays(scene.split("test")[0].camera)
@@ -123,12 +129,13 @@ def test_growing_takes_the_adam_moments_along(scene):
     optimizer = model.make_optimizer()
     origins, directions = camera_rays(scene.split("train")[0].camera)
     out = model.render_rays(origins, directions, torch.ones(len(origins), 3))
-    model.loss(out, torch.zeros(len(origins), 3)).backward()
+    torch.mean(out.rgb ** 2).backward()
     optimizer.step()
-    before = optimizer.state[model.density.values]["exp_avg_sq"].sum()
-    model.before_step(1, 1.0)  # the end of the budget: the final lattice
-    state = optimizer.state[model.density.values]
-    assert state["exp_avg_sq"].shape == model.density.values.shape
+    grid = model.density_grid
+    before = optimizer.state[grid.values]["exp_avg_sq"].sum()
+    model.grow(model.lattice(1.0))  # the end of the budget: the final lattice
+    state = optimizer.state[grid.values]
+    assert state["exp_avg_sq"].shape == grid.values.shape
     assert state["exp_avg_sq"].sum() > 0.5 * before and state["step"] == 1
 
 
@@ -141,7 +148,7 @@ def test_the_pure_pytorch_path_learns_too(scene, monkeypatch):
     errors = []
     for steps in (1, 40):
         model = trained(scene, steps=steps)
-        assert not model.density.values.grad.is_sparse
+        assert not model.density_grid.values.grad.is_sparse
         with torch.no_grad():
             rgb = model.render_rays(origins, directions, torch.ones(len(origins), 3)).rgb
         errors.append(float(torch.mean((rgb - truth) ** 2)))

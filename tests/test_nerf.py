@@ -7,6 +7,8 @@ import torch
 
 from windowshop.config import NERF_PRESETS, NerfConfig
 from windowshop.field.nerf import NerfField, NerfModel
+from windowshop.fit.losses import LossInput, loss_terms, total_loss
+from windowshop.fit.schedule import StepInfo, schedule_for
 from windowshop.model import Bounds, model_class, model_config
 
 BOUNDS = Bounds(aabb=((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)), near=2.0, far=6.0)
@@ -92,7 +94,8 @@ def test_fine_pass_reports_both_colours_and_all_samples():
     assert out.rgb.shape == (5, 3) and out.depth.shape == (5,) and out.opacity.shape == (5,)
     assert out.aux["rgb_coarse"].shape == (5, 3)
     assert out.num_samples == 5 * (8 + 8 + 8)
-    loss = model.loss(out, torch.zeros(5, 3))
+    target = torch.zeros(5, 3)
+    loss = total_loss(loss_terms(model.config), LossInput(model, out, target, torch.ones(5, 3)))
     loss.backward()
     assert model.coarse.trunk[0].weight.grad is not None  # coarse colour is supervised too
     assert model.fine.trunk[0].weight.grad is not None
@@ -119,10 +122,13 @@ def test_near_far_default_to_the_bounds_and_can_be_overridden():
 
 def test_learning_rate_decays_exponentially_to_the_final_rate():
     model = NerfModel(SMALL, BOUNDS)
-    assert model.lr_factor(0.0) == 1.0
-    assert model.lr_factor(1.0) == pytest.approx(0.1)
-    assert model.lr_factor(0.5) == pytest.approx(0.1 ** 0.5)
-    assert model.make_optimizer().param_groups[0]["lr"] == 5e-4
+    optimizer = model.make_optimizer()
+    assert optimizer.param_groups[0]["lr"] == 5e-4
+    optimizer.param_groups[0]["initial_lr"] = 5e-4
+    (schedule,) = schedule_for(model)
+    for fraction, factor in ((0.0, 1.0), (1.0, 0.1), (0.5, 0.1 ** 0.5), (2.0, 0.1)):
+        schedule.before_step(StepInfo(model, optimizer, 0, fraction))
+        assert optimizer.param_groups[0]["lr"] == pytest.approx(5e-4 * factor)
 
 
 def test_rendering_without_gradients_slices_the_points_and_agrees():

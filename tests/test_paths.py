@@ -10,6 +10,7 @@ import pytest
 
 from windowshop.config import VideoOptions
 from windowshop.errors import UserError
+from windowshop.model import Bounds
 from windowshop.rays import project
 from windowshop.scene.types import Camera
 from windowshop.video.paths import (
@@ -22,6 +23,7 @@ from windowshop.video.paths import (
 from shared_data import DATA
 
 LEGO = DATA / "lego"
+BOX = Bounds(aabb=((-1.0,) * 3, (1.0,) * 3), near=0.01, far=100.0)  # about the capture's centre
 
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -87,7 +89,7 @@ def test_fit_orbit_recovers_a_tilted_offset_partial_arc():
 def test_orbit_is_centred_evenly_spaced_at_constant_elevation_and_radius():
     train = capture(np.arange(0, 360, 30) + 17, [10, 40] * 6, radius=4.0)
     options = VideoOptions(frames=24, width=64, height=48, start_angle=15.0)
-    cams = turntable_path(train, options)
+    cams = turntable_path(train, options, BOX)
     orbit = fit_orbit(train)
     assert len(cams) == 24 and all((c.width, c.height) == (64, 48) for c in cams)
     az, el, dist = orbit_coordinates(cams, orbit.centre, orbit.up, orbit.reference)
@@ -95,16 +97,14 @@ def test_orbit_is_centred_evenly_spaced_at_constant_elevation_and_radius():
     np.testing.assert_allclose(np.degrees(steps), 15.0, atol=1e-9)
     assert az[0] == pytest.approx(15.0)  # start angle is measured from the first training camera
     np.testing.assert_allclose(el, 25.0, atol=1e-6)  # median of the training elevations
-    np.testing.assert_allclose(dist, 4.0, atol=1e-6)
+    np.testing.assert_allclose(dist, dist[0], atol=1e-9)  # one radius (framing the box: test_framing)
     assert_centred_and_upright(cams, orbit.centre, orbit.up)
-    # the field of view of the training cameras is kept: the same focal per pixel of height
-    assert cams[0].fy == pytest.approx(50.0 * 48 / 40)
 
 
 def test_orbit_options_override_radius_elevation_and_fov():
     train = capture(np.arange(0, 360, 45), [30] * 8)
     cams = turntable_path(train, VideoOptions(frames=8, width=32, height=32, radius=2.0,
-                                              elevation=-10.0, fov=60.0))
+                                              elevation=-10.0, fov=60.0), BOX)
     az, el, dist = orbit_coordinates(cams, np.zeros(3), np.array([0, 0, 1.0]), np.array([1.0, 0, 0]))
     np.testing.assert_allclose(dist, 2.0, atol=1e-9)
     np.testing.assert_allclose(el, -10.0, atol=1e-9)
@@ -113,14 +113,16 @@ def test_orbit_options_override_radius_elevation_and_fov():
 
 def test_a_portrait_turntable_keeps_the_training_view_across_its_narrow_side():
     train = capture(np.arange(0, 360, 45), [30] * 8, size=40, focal=50.0)  # square photos
-    (cam,) = turntable_path(train, VideoOptions(frames=1, width=32, height=64))
+    # a box that is widest seen from the first camera and far enough to need no zoom
+    box = Bounds(aabb=((-0.1, -0.5, -0.2), (0.1, 0.5, 0.2)), near=0.01, far=100.0)
+    (cam,) = turntable_path(train, VideoOptions(frames=1, width=32, height=64), box)
     assert cam.fx == pytest.approx(50.0 * 32 / 40) and cam.fy == cam.fx  # width sees what they saw
 
 
 def test_spiral_swings_elevation_up_and_down_around_the_orbit():
     train = capture(np.arange(0, 360, 45), [30] * 8)
     cams = turntable_path(train, VideoOptions(frames=40, width=32, height=32, path="spiral",
-                                              spiral_amplitude=12.0))
+                                              spiral_amplitude=12.0, radius=3.0), BOX)
     up, ref = np.array([0, 0, 1.0]), np.array([1.0, 0, 0])
     az, el, dist = orbit_coordinates(cams, np.zeros(3), up, ref)
     np.testing.assert_allclose(el, spiral_elevations(30.0, 12.0, 40), atol=1e-9)
@@ -132,7 +134,7 @@ def test_spiral_swings_elevation_up_and_down_around_the_orbit():
 
 def test_camera_path_json_round_trip(tmp_path):
     train = capture(np.arange(0, 360, 45), [30] * 8)
-    cams = turntable_path(train, VideoOptions(frames=6, width=40, height=30, fov=50.0))
+    cams = turntable_path(train, VideoOptions(frames=6, width=40, height=30, fov=50.0), BOX)
     path = write_camera_path(cams, tmp_path / "path.json", fps=24)
     doc = json.loads(path.read_text())
     assert doc["render_width"] == 40 and doc["render_height"] == 30
@@ -144,7 +146,7 @@ def test_camera_path_json_round_trip(tmp_path):
         assert (b.fx, b.fy, b.cx, b.cy, b.width, b.height) == pytest.approx(
             (a.fx, a.fy, a.cx, a.cy, a.width, a.height))
     # a path file is a path option too
-    assert len(turntable_path(train, VideoOptions(path=str(path)))) == 6
+    assert len(turntable_path(train, VideoOptions(path=str(path)), BOX)) == 6
 
 
 def test_camera_path_reads_nerfstudio_row_major_layout(tmp_path):
@@ -175,17 +177,25 @@ def test_lego_orbit_matches_its_capture_ring():
     from windowshop.config import SceneOptions
     from windowshop.scene import load_scene
 
+    from windowshop.video.framing import box_corners
+
     scene = load_scene(LEGO, SceneOptions(max_side=20, test_views=1))  # few images: quick
     train = [v.camera for v in scene.split("train")]
     orbit = fit_orbit(train)
-    cams = turntable_path(train, VideoOptions(frames=12, width=32, height=32))
-    # Back in lego's own frame the ring has radius 4.03 about the origin, up +z.
-    source = [scene.source_camera(c) for c in cams]
-    _, el, dist = orbit_coordinates(source, np.zeros(3), np.array([0, 0, 1.0]), np.array([1.0, 0, 0]))
-    np.testing.assert_allclose(dist, 4.03, atol=0.05)
+    bounds = Bounds.of_scene(scene)
+    cams = turntable_path(train, VideoOptions(frames=12, width=32, height=32), bounds)
+    # Back in lego's own frame the photos' ring has radius 4.03 about the origin, up +z.
     assert orbit.radius / scene.scale == pytest.approx(4.03, abs=0.05)
-    train_el = orbit_coordinates([scene.source_camera(c) for c in train], np.zeros(3),
-                                 np.array([0, 0, 1.0]), np.array([1.0, 0, 0]))[1]
+    # The turntable frames lego's box instead, within the depths the model renders.
+    for cam in cams:
+        uv, depth = project(box_corners(bounds.aabb), cam)
+        assert (uv > 0).all() and (uv < 32).all()
+        assert max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1])) / 32 == pytest.approx(0.8, abs=0.05)
+        assert depth.max() <= bounds.far + 1e-6
+    # ... about its centre, at the photos' median elevation about that centre
+    centre = np.asarray(bounds.aabb).mean(0)
+    _, el, _ = orbit_coordinates(cams, centre, orbit.up, orbit.reference)
+    train_el = orbit_coordinates(train, centre, orbit.up, orbit.reference)[1]
     assert np.ptp(el) < 1e-6 and train_el.min() < el[0] < train_el.max()
     assert el[0] == pytest.approx(np.median(train_el), abs=0.5)
-    assert_centred_and_upright(cams, orbit.centre, orbit.up)
+    assert_centred_and_upright(cams, centre, orbit.up)

@@ -17,7 +17,7 @@ from windowshop.scene.synthetic import orbit_cameras, synthetic_scene
 from windowshop.scene.types import Camera
 from windowshop.video.encode import VideoOutputs, read_video
 from windowshop.video.paths import read_camera_path, turntable_path, write_camera_path
-from windowshop.video.turntable import depth_range, render_turntable
+from windowshop.video.turntable import VIDEO_BACKGROUNDS, default_outputs, depth_range, render_turntable
 
 RED = (0.9, 0.1, 0.1)
 
@@ -53,7 +53,9 @@ def red_mask(frame: np.ndarray) -> np.ndarray:
 def test_sphere_stays_centred_and_the_same_size_in_every_frame(tmp_path):
     model = Sphere()
     train = orbit_cameras(12, 32, radius=3.0)
-    cameras = turntable_path(train, VideoOptions(frames=10, width=64, height=48))
+    # a fixed radius and field of view: the box (a cube) would otherwise be framed frame by frame
+    cameras = turntable_path(train, VideoOptions(frames=10, width=64, height=48, radius=3.0, fov=40.0),
+                             model.bounds)
     done = []
     result = render_turntable(model, cameras, VideoOutputs(mp4=tmp_path / "s.mp4",
                                                            depth=tmp_path / "d.mp4"),
@@ -69,13 +71,31 @@ def test_sphere_stays_centred_and_the_same_size_in_every_frame(tmp_path):
         assert abs(rows.mean() + 0.5 - 24) < 0.5 and abs(cols.mean() + 0.5 - 32) < 0.5
         areas.append(len(rows))
     assert max(areas) - min(areas) <= 0.03 * np.mean(areas)
-    # the sphere's expected disc: radius 0.5 at distance 3 seen with the training cameras' focal
+    # the sphere's expected disc: radius 0.5 at distance 3 seen with the path's focal
     focal = cameras[0].fy
     expected = np.pi * (focal * 0.5 / np.sqrt(3.0 ** 2 - 0.5 ** 2)) ** 2
     assert np.mean(areas) == pytest.approx(expected, rel=0.1)
     _, depth_frames = read_video(tmp_path / "d.mp4")
     depth = next(depth_frames).astype(float)
     assert depth[24, 32].sum() > 200 and depth[2, 2].sum() < 10  # a bright surface on black
+
+
+def test_a_transparent_turntable_shows_the_object_opaque_on_a_clear_ground(tmp_path):
+    model = Sphere()
+    cameras = turntable_path(orbit_cameras(12, 32, radius=3.0), VideoOptions(frames=3, width=32, height=32),
+                             model.bounds)
+    outputs = default_outputs(tmp_path / "s.webm", poster=True, frames_dir=tmp_path / "f",
+                              transparent=True)
+    render_turntable(model, cameras, outputs, fps=10, background=VIDEO_BACKGROUNDS["transparent"],
+                     progress=False)
+    _, frames = read_video(tmp_path / "s.webm", alpha=True)
+    images = [*frames, np.asarray(Image.open(tmp_path / "s_poster.png")),
+              *(np.asarray(Image.open(f)) for f in sorted((tmp_path / "f").glob("*.png")))]
+    assert len(images) == 3 + 1 + 3
+    for image in images:
+        assert image.shape == (32, 32, 4)
+        assert image[16, 16, 3] > 245 and red_mask(image[14:18, 14:18, :3]).all()  # the sphere
+        assert max(image[0, 0, 3], image[0, -1, 3], image[-1, 0, 3], image[-1, -1, 3]) < 10
 
 
 def test_depth_range_spans_the_box_as_the_path_sees_it():
@@ -116,16 +136,36 @@ def test_render_cli_writes_every_output(run_dir, tmp_path, capsys):
     # the frames folder says which camera made each frame
     from windowshop.fit.checkpoint import load_run
 
-    expected = turntable_path(load_run(run_dir).train_cameras,
-                              VideoOptions(frames=9, width=32, height=24))
+    run = load_run(run_dir)
+    expected = turntable_path(run.train_cameras, VideoOptions(frames=9, width=32, height=24), run.bounds)
     saved = read_camera_path(tmp_path / "frames" / "camera_path.json")
     np.testing.assert_allclose(np.stack([c.c2w for c in saved]), np.stack([c.c2w for c in expected]),
                                atol=1e-9)
     assert "wrote" in capsys.readouterr().out
+    # the run remembers what the turntable showed: the path, the photos' arc, the poster's frame
+    summary = json.loads((run_dir / "render.json").read_text())
+    assert summary["path"] == "orbit" and summary["frames"] == 9 and summary["background"] == "white"
+    assert 0 < summary["covered_span_degrees"] <= 360 and 0 <= summary["poster_frame"] < 9
+
+
+def test_render_cli_transparent_writes_a_webm_and_pngs_with_alpha(run_dir, tmp_path, capsys):
+    out = tmp_path / "t.webm"
+    assert main(["render", str(run_dir), "--out", str(out), "--background", "transparent",
+                 "--frames", "3", "--size", "16", "--poster", "--frames-dir", str(tmp_path / "f"),
+                 "--device", "cpu"]) == 0
+    meta, frames = read_video(out, alpha=True)
+    assert meta["codec"] == "vp9" and [f.shape for f in frames] == [(16, 16, 4)] * 3
+    for png in [tmp_path / "t_poster.png", *sorted((tmp_path / "f").glob("frame_*.png"))]:
+        assert Image.open(png).mode == "RGBA"
+    assert json.loads((run_dir / "render.json").read_text())["background"] == "transparent"
+    code = main(["render", str(run_dir), "--out", str(tmp_path / "t.mp4"), "--background",
+                 "transparent", "--device", "cpu"])
+    assert code == 2 and "webm" in capsys.readouterr().err and not (tmp_path / "t.mp4").exists()
 
 
 def test_render_cli_follows_a_camera_path_file(run_dir, tmp_path):
-    cameras = turntable_path(orbit_cameras(8, 16), VideoOptions(frames=5, width=20, height=16))
+    cameras = turntable_path(orbit_cameras(8, 16), VideoOptions(frames=5, width=20, height=16),
+                             Bounds(aabb=((-1.0,) * 3, (1.0,) * 3), near=0.1, far=10.0))
     path = write_camera_path(cameras, tmp_path / "path.json")
     out = tmp_path / "custom.mp4"
     assert main(["render", str(run_dir), "--out", str(out), "--path", str(path), "--fps", "5",

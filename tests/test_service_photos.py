@@ -29,5 +29,9 @@ def test_photos_become_a_turntable(tmp_path):
         assert len(status["links"]["frames"]) == int(FAST_JOB["WINDOWSHOP_JOB__RENDER__FRAMES"])
         video = httpx.get(service.url + status["links"]["video"])
         assert video.status_code == 200 and video.content[4:8] == b"ftyp"
+        report = httpx.get(service.url + status["links"]["report"]).json()
+        assert report["photos"] == 11 and report["placed"] >= 9 and isinstance(report["advice"], list)
+        coverage = httpx.get(service.url + status["links"]["coverage"])
+        assert coverage.content[:8] == b"\x89PNG\r\n\x1a\n"
     finally:
         service.stop()

@@ -47,6 +47,10 @@ def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
     assert result.poster.is_file() and len(list((tmp_path / "frames").glob("*.jpg"))) == 4
     assert set(result.seconds) == {"fit", "render"} and result.scene_dir == posed
     assert json.loads((tmp_path / "spin_work" / "video.json").read_text())["mp4"] == str(result.mp4)
+    report = json.loads((tmp_path / "spin_report.json").read_text())  # the capture's quality report
+    assert report == json.loads(json.dumps(result.report)) and report["placed"] == 9
+    assert report["held_out_photos"] == 1 and report["held_out_psnr"] == result.metrics["psnr"]
+    assert (tmp_path / "spin_coverage.png").is_file()
 
 
 def test_cli_video_prints_each_stage(posed, tmp_path, capsys):

@@ -83,7 +83,8 @@ def cmd_render(args: argparse.Namespace) -> None:
     options = apply_overrides(cfg.VideoOptions(), _overrides(args), "render")
     outputs = default_outputs(args.out, gif=args.gif, webp=args.webp, depth=args.depth,
                               poster=args.poster, frames_dir=args.frames_dir,
-                              frames_format=args.frames_format)
+                              frames_format=args.frames_format,
+                              transparent=options.background == "transparent")
     render_command(args.run, options, outputs, pick_device(args.device))
 
 
@@ -178,11 +179,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="render a run's 360° turntable video")
     p.add_argument("run", help="run folder written by `windowshop fit`")
-    p.add_argument("--out", required=True, help="the MP4 to write (H.264, plays in browsers)")
+    p.add_argument("--out", required=True,
+                   help="the video to write: .mp4 (H.264, plays in browsers) or .webm (VP9, keeps alpha)")
     add_flags(p, cfg.VideoOptions, "turntable")
     _add_size(p, nested=False)
     for name, what in [("gif", "an animated GIF"), ("webp", "an animated WebP"),
-                       ("depth", "a colour-mapped depth MP4"), ("poster", "the first frame")]:
+                       ("depth", "a colour-mapped depth MP4"),
+                       ("poster", "the frame facing most photos")]:
         p.add_argument(f"--{name}", nargs="?", const=True, default=False, metavar="FILE",
                        help=f"also write {what} (default name beside --out)")
     p.add_argument("--frames-dir", help="also write every frame as an image into DIR")

@@ -126,12 +126,14 @@ class VideoOptions:
     width: int = 256  # pixels
     height: int = 256  # pixels
     path: str = "orbit"  # "orbit", "spiral" or a nerfstudio camera-path JSON file
-    radius: float | None = None  # None: the median distance of the training cameras from the centre
+    radius: float | None = None  # None: the distance at which the object fills 80% of the frame
     elevation: float | None = None  # degrees above the orbit plane; None: the training views' median
     start_angle: float = 0.0  # degrees of azimuth past the first training camera
-    fov: float | None = None  # vertical, degrees; None: the training cameras' median, on the narrower side
+    fov: float | None = None  # vertical, degrees; None: the photos' median, zoomed to frame the object
     spiral_amplitude: float = 15.0  # degrees the spiral swings above and below its elevation
     chunk: int = 8192  # rays rendered at once (bounds memory at any resolution)
+    full_turn: bool = False  # turn all the way round even when the photos cover under 300 degrees
+    background: str = "white"  # "white", "black" or "transparent" (alpha: a .webm video, PNG images)
 
 
 @dataclass(frozen=True)

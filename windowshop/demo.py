@@ -37,7 +37,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig, device: torch.device | str
     against the true frames, timings and the files written.
     """
     from windowshop.fit.trainer import fit
-    from windowshop.model import model_config
+    from windowshop.model import Bounds, model_config
     from windowshop.render.frames import display_background
     from windowshop.scene import load_scene
     from windowshop.scene.synthetic import synthetic_scene
@@ -61,7 +61,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig, device: torch.device | str
     video = config.render
     outputs = default_outputs(out_dir / "turntable.mp4", poster=True)
     result = render_run(out_dir / "run", video, outputs, device)
-    cameras = turntable_path([v.camera for v in scene.split("train")], video)  # as render_run's
+    cameras = turntable_path([v.camera for v in scene.split("train")], video,
+                             Bounds.of_scene(scene))  # as render_run's
     summary = {
         "model": config.model, "preset": config.preset, "config": asdict(config),
         "device": str(device),

@@ -1,8 +1,10 @@
 """The contract between a radiance model, the trainer and the renderers.
 
-A model is an `nn.Module` that turns rays into colours. The trainer, `eval`, `render`, the study
-and the service only use what is declared here, so every model (`nerf`, `fast`, ...) plugs into all
-of them. Models are registered by name in `MODELS` and rebuilt from their checkpoint's own config.
+A model is an `nn.Module` that turns rays into colours and answers for its density and colour at
+any point (so an exporter or a loss needs nothing model-specific); its losses (windowshop.fit.losses)
+and schedule (windowshop.fit.schedule) live with the trainer. The trainer, `eval`, `render`, the
+study and the service only use what is declared here, so every model (`nerf`, `fast`, ...) plugs
+into all of them. Models are registered by name in `MODELS` and rebuilt from their checkpoint's own config.
 """
 
 from __future__ import annotations
@@ -74,24 +76,17 @@ class RadianceModel(nn.Module):
         """Render rays `origins` (R, 3), unit `directions` (R, 3) over `background` (R, 3)."""
         raise NotImplementedError
 
-    def loss(self, out: RenderOutput, target: torch.Tensor) -> torch.Tensor:
-        """Training loss against `target` (R, 3): MSE of the colour and of any auxiliary colour."""
-        loss = torch.mean((out.rgb - target) ** 2)
-        for key, value in out.aux.items():
-            if key.startswith("rgb_"):
-                loss = loss + torch.mean((value - target) ** 2)
-        return loss
+    def density(self, points: torch.Tensor) -> torch.Tensor:
+        """Density (N,) >= 0 at world points (N, 3), as `render_rays` composites it."""
+        raise NotImplementedError
+
+    def colour(self, points: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """Colour (N, 3) in [0, 1] at world points (N, 3) seen along unit `directions` (N, 3)."""
+        raise NotImplementedError
 
     def make_optimizer(self) -> torch.optim.Optimizer:
         """The optimizer the trainer steps; its groups' `lr` are the initial learning rates."""
         raise NotImplementedError
-
-    def lr_factor(self, progress: float) -> float:
-        """Multiplier of the initial learning rates at `progress` in [0, 1] of the budget."""
-        return 1.0
-
-    def before_step(self, step: int, progress: float) -> None:
-        """Hook called by the trainer before each optimisation step (occupancy updates, growth)."""
 
 
 MODELS = {

@@ -13,16 +13,13 @@ from __future__ import annotations
 import json
 import shutil
 import sys
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
-from windowshop.config import FitConfig, PipelineConfig
+from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
 from windowshop.photos.progress import StageCallback
 
@@ -37,6 +34,8 @@ class VideoResult:
     run_dir: Path
     seconds: dict[str, float]  # stage -> seconds
     metrics: dict  # the fit's held-out metrics
+    report: dict  # the capture's quality report (windowshop.quality), also at report_path
+    report_path: Path
 
 
 def is_posed_scene(path: Path) -> bool:
@@ -48,37 +47,6 @@ def is_posed_scene(path: Path) -> bool:
     except UserError:
         return False
     return True
-
-
-def _fit_fraction(line: str, config: FitConfig) -> float:
-    stats = json.loads(line)
-    parts = [stats["step"] / config.iters if config.iters else 0.0,
-             stats["elapsed"] / config.seconds if config.seconds else 0.0]
-    return min(max(parts), 1.0)
-
-
-@contextmanager
-def _watch_fit(log: Path, config: FitConfig, on_stage: StageCallback | None) -> Iterator[None]:
-    """Report the fit's progress from its log.jsonl (the trainer takes no callback) every 0.5 s,
-    from a helper thread."""
-    stop = threading.Event()
-
-    def poll() -> None:
-        while not stop.wait(0.5):
-            lines = log.read_text().splitlines() if log.is_file() else []
-            if lines and on_stage is not None:
-                try:
-                    on_stage("fit", _fit_fraction(lines[-1], config))
-                except ValueError:  # a line being written
-                    pass
-
-    thread = threading.Thread(target=poll, daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join()
 
 
 def _work_dir(work: Path) -> Path:
@@ -101,20 +69,24 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     every stage set by `config`.
 
     `work_dir` (default: `<out stem>_work` beside the MP4) keeps the posed scene (`scene/`) and
-    the trained run (`run/`). `poster` writes the first frame beside the MP4 (True) or to a path;
-    `frames_dir` also writes every frame as a JPEG there. `on_stage(stage, fraction)` is called
-    with stage "prepare" (skipped for a posed scene), "fit" and "render" as each advances (during
-    the fit from a helper thread). Prints each stage and its time when `show`.
+    the trained run (`run/`). `poster` writes the best-covered frame beside the MP4 (True) or to a
+    path; `frames_dir` also writes every frame as a JPEG (PNG with alpha when transparent) there.
+    The capture's quality report goes beside the video (`<stem>_report.json`, `<stem>_coverage.png`). `on_stage(stage, fraction)` is called
+    with stage "prepare" (skipped for a posed scene), "fit" (after every training step) and "render"
+    as each advances. Prints each stage and its time when `show`.
     """
+    from windowshop.fit.callbacks import FitCallbacks
     from windowshop.fit.trainer import fit
     from windowshop.model import model_config
     from windowshop.photos.prepare import prepare
     from windowshop.scene import load_scene
     from windowshop.video.turntable import default_outputs, render_run
+    from windowshop.quality import quality_report, summary_lines, write_quality_report
 
     source, out_mp4 = Path(source), Path(out_mp4)
     if not source.exists():
         raise UserError(f"{source}: no such file or folder")
+    check_output(out_mp4, config.render.background)
     work = _work_dir(Path(work_dir) if work_dir else out_mp4.with_name(f"{out_mp4.stem}_work"))
     out_mp4.parent.mkdir(parents=True, exist_ok=True)
     report = on_stage or (lambda stage, fraction: None)
@@ -136,22 +108,41 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     report("fit", 0.0)
     scene = load_scene(scene_dir, config.scene)
     model = model_config(config.model, config.preset, **config.model_settings)
-    with _watch_fit(work / "run" / "log.jsonl", config.fit, on_stage):
-        metrics = fit(scene, config.model, model, config.fit, work / "run", device,
-                      show_progress=show)
+    metrics = fit(scene, config.model, model, config.fit, work / "run", device, show_progress=show,
+                  callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
 
     start = time.perf_counter()
     report("render", 0.0)
-    outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, frames_format="jpg")
-    render_run(work / "run", config.render, outputs, device, progress=show,
-               on_frame=lambda k, n: report("render", k / n))
+    transparent = config.render.background == "transparent"
+    outputs = default_outputs(out_mp4, poster=poster, frames_dir=frames_dir, transparent=transparent,
+                              frames_format="png" if transparent else "jpg")
+    rendered = render_run(work / "run", config.render, outputs, device, progress=show,
+                          on_frame=lambda k, n: report("render", k / n))
     done("render", start)
 
+    quality = quality_report(scene, metrics, rendered.path, _prepare_report(scene_dir, source))
+    report_path, _ = write_quality_report(out_mp4.with_name(f"{out_mp4.stem}_report.json"), quality)
     result = VideoResult(mp4=out_mp4, poster=outputs.poster, scene_dir=Path(scene_dir),
-                         run_dir=work / "run", seconds=seconds, metrics=metrics)
+                         run_dir=work / "run", seconds=seconds, metrics=metrics, report=quality,
+                         report_path=report_path)
     (work / MARKER).write_text(json.dumps({**asdict(result), "config": asdict(config)},
                                           indent=2, default=str))
     if show:
-        print(f"wrote {out_mp4} in {sum(seconds.values()):.0f} s", file=sys.stderr)
+        print("\n".join(summary_lines(quality)), file=sys.stderr)
+        print(f"wrote {out_mp4} and {report_path.name} in {sum(seconds.values()):.0f} s",
+              file=sys.stderr)
     return result
+
+
+def _prepare_report(scene_dir: Path, source: Path) -> dict | None:
+    """What prepare said of the photos (None when the input was already a posed scene)."""
+    path = Path(scene_dir) / "report.json"
+    return json.loads(path.read_text()) if Path(scene_dir) != source and path.is_file() else None
+
+
+def check_output(out: Path, background: str) -> None:
+    """Refuse, before any work, a video file that cannot hold what was asked."""
+    if (background == "transparent") != (out.suffix.lower() == ".webm"):
+        raise UserError(f"{out}: a transparent turntable is written as .webm (VP9 with alpha), "
+                        f"any other as .mp4; name the output accordingly")

@@ -87,13 +87,13 @@ class FastModel(RadianceModel):
         aabb = bounds.aabb_tensor()
         self.extent = aabb[1] - aabb[0]
         self.voxels = config.voxels or DEFAULT_VOXELS
-        shape = self.target_shape(0.0)
+        shape = self.lattice(config.start_fraction if config.growth else 1.0)
         final_voxel = float(torch.prod(self.extent) / self.voxels) ** (1.0 / 3.0)
         self.density_scale = 1.0 / final_voxel  # softplus units are "per final voxel"
         self.shift = 0.0  # raw 0 starts at opacity alpha_init over a final-resolution step:
         self.shift = self._raw_at_alpha(config.alpha_init)
-        self.density = DenseGrid(shape, 1, aabb)
-        self.features = DenseGrid(shape, config.features, aabb)
+        self.density_grid = DenseGrid(shape, 1, aabb)
+        self.feature_grid = DenseGrid(shape, config.features, aabb)
         self.occupancy = OccupancyGrid(tuple(s - 1 for s in shape), aabb)
         n_dir = (config.sh_degree + 1) ** 2 if config.sh_degree >= 0 else 0
         self.mlp = nn.Sequential(nn.Linear(config.features + n_dir, config.hidden), nn.ReLU(),
@@ -109,11 +109,16 @@ class FastModel(RadianceModel):
     @property
     def step_length(self) -> float:
         """Marching step in world units for the current grid."""
-        return float(self.density.voxel.min()) * self.config.step
+        return float(self.density_grid.voxel.min()) * self.config.step
 
-    def sigma(self, points: torch.Tensor) -> torch.Tensor:
-        """Density (N,) at world points (N, 3)."""
-        return self._activate(self.density(points)[:, 0])
+    def density(self, points: torch.Tensor) -> torch.Tensor:
+        """Density (N,) at world points (N, 3): the grid's interpolated raw value, activated."""
+        return self._activate(self.density_grid(points)[:, 0])
+
+    def colour(self, points: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """Colour (N, 3) at world points (N, 3) seen along unit `directions` (N, 3): the MLP's
+        decoding of the point's interpolated features (a ray's colour decodes the composited ones)."""
+        return self.decode(self.feature_grid(points), directions)
 
     def _activate(self, raw: torch.Tensor) -> torch.Tensor:
         """Density from raw grid values (post-activation: interpolate, then softplus)."""
@@ -148,9 +153,9 @@ class FastModel(RadianceModel):
         threshold = self.config.weight_threshold if self.training else self.config.render_threshold
         keep = (weights.detach() >= threshold).nonzero()[:, 0]  # still sorted by ray
         kept_ray = ray.index_select(0, keep)
-        features = self.features.composite(origins, directions, t.index_select(0, keep),
-                                           weights.index_select(0, keep), kept_ray,
-                                           torch.bincount(kept_ray, minlength=n_rays))
+        features = self.feature_grid.composite(origins, directions, t.index_select(0, keep),
+                                               weights.index_select(0, keep), kept_ray,
+                                               torch.bincount(kept_ray, minlength=n_rays))
         mean = features / opacity.detach().clamp(min=threshold)[:, None]
         color = opacity[:, None] * self.decode(mean, directions) + (1.0 - opacity)[:, None] * background
         return RenderOutput(rgb=color, depth=depth, opacity=opacity, aux=aux, num_samples=count)
@@ -169,7 +174,7 @@ class FastModel(RadianceModel):
         if self.training and self.config.tv_density > 0:
             raw, aux["tv_density"] = self._density_with_tv(origins, directions, t, ray)
         else:
-            raw = self.density.along_rays(origins, directions, t, ray)[:, 0]
+            raw = self.density_grid.along_rays(origins, directions, t, ray)[:, 0]
         weights = packed_weights(self._activate(raw), step, ray, samples.counts)
         if self.training and self.config.distortion > 0:
             aux["distortion"] = packed_distortion(weights, t, step, ray, samples.counts)
@@ -181,9 +186,9 @@ class FastModel(RadianceModel):
         """Raw density (S,) at the samples and its total variation: the mean squared change one
         voxel away along each axis from every sample (one grid read, so one sparse gradient)."""
         points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
-        steps = torch.diag(self.density.voxel)  # (3, 3)
+        steps = torch.diag(self.density_grid.voxel)  # (3, 3)
         neighbours = (points[None] + steps[:, None, :]).reshape(-1, 3)
-        raw = self.density(torch.cat([points, neighbours]))[:, 0]
+        raw = self.density_grid(torch.cat([points, neighbours]))[:, 0]
         here, there = raw[:len(points)], raw[len(points):].view(3, -1)
         return here, torch.mean((there - here[None]) ** 2)
 
@@ -191,7 +196,7 @@ class FastModel(RadianceModel):
     def _march_and_weigh_fused(self, origins: torch.Tensor, directions: torch.Tensor):
         """As `_march_and_weigh` without jitter, in one kernel that stops each ray once its
         transmittance is below `render_threshold` and returns only the samples above it."""
-        occupancy, density = self.occupancy, self.density
+        occupancy, density = self.occupancy, self.density_grid
         t_min, t_max = ray_box(origins, directions, occupancy.aabb, self.bounds.near, self.bounds.far)
         t, weights, ray, counts, opacity, depth = kernels.render_march(
             origins.contiguous(), directions.contiguous(), t_min, t_max, self.step_length,
@@ -199,42 +204,25 @@ class FastModel(RadianceModel):
             density.mapping()[1], self.shift, self.density_scale, self.config.render_threshold)
         return t, weights, ray, opacity, depth, len(t)
 
-    # --- training -------------------------------------------------------------------------------
-    def loss(self, out: RenderOutput, target: torch.Tensor) -> torch.Tensor:
-        loss = torch.mean((out.rgb - target) ** 2)
-        if "distortion" in out.aux:
-            loss = loss + self.config.distortion * out.aux["distortion"].mean()
-        if "tv_density" in out.aux:
-            loss = loss + self.config.tv_density * out.aux["tv_density"]
-        return loss
-
+    # --- training: primitives the schedule (fit/schedule.py) calls ------------------------------
     def make_optimizer(self) -> torch.optim.Optimizer:
         cfg = self.config
         # kept (weakly) so that growing grids take their Adam moments along (see grow)
         optimizer = GridAdam([
-            {"params": [self.density.values, self.features.values], "lr": cfg.lr_grid},
+            {"params": [self.density_grid.values, self.feature_grid.values], "lr": cfg.lr_grid},
             {"params": list(self.mlp.parameters()), "lr": cfg.lr_mlp},
         ])
         self._optimizer = weakref.ref(optimizer)
         return optimizer
 
-    def lr_factor(self, progress: float) -> float:
-        return self.config.lr_final ** min(max(progress, 0.0), 1.0)
+    @property
+    def grid_shape(self) -> tuple[int, int, int]:
+        """Vertices per axis of both grids now."""
+        return self.density_grid.shape
 
-    def target_shape(self, progress: float) -> tuple[int, int, int]:
-        """The lattice for `progress`: voxels grow geometrically at each `growth` point passed."""
-        growth = self.config.growth
-        done = sum(progress >= p for p in growth)
-        fraction = self.config.start_fraction ** (1.0 - done / len(growth)) if growth else 1.0
-        return lattice_shape(self.extent, round(self.voxels * fraction))
-
-    def before_step(self, step: int, progress: float) -> None:
-        shape = self.target_shape(progress)
-        grew = shape != self.density.shape
-        if grew:
-            self.grow(shape)
-        if step >= self.config.occupancy_warmup and (grew or step % self.config.occupancy_every == 0):
-            self.refresh_occupancy()
+    def lattice(self, share: float) -> tuple[int, int, int]:
+        """The lattice of `share` of the final voxel count over the object's box."""
+        return lattice_shape(self.extent, round(self.voxels * share))
 
     @torch.no_grad()
     def grow(self, shape: tuple[int, int, int]) -> None:
@@ -243,7 +231,7 @@ class FastModel(RadianceModel):
         full learning rate at once, a jolt that costs several dB at 400x400.)"""
         optimizer = self._optimizer() if self._optimizer is not None else None
         states = optimizer.state if optimizer is not None else {}
-        for grid in (self.density, self.features):
+        for grid in (self.density_grid, self.feature_grid):
             state = states.get(grid.values)
             if state and state["exp_avg"].shape == grid.values.shape:
                 for key in ("exp_avg", "exp_avg_sq"):
@@ -256,4 +244,11 @@ class FastModel(RadianceModel):
     def refresh_occupancy(self) -> None:
         """Skip the cells where no corner reaches `occupancy_alpha` over one step."""
         raw = self._raw_at_alpha(self.config.occupancy_alpha)
-        self.occupancy.set_from_vertices(self.density.vertex_values()[0], raw)
+        self.occupancy.set_from_vertices(self.density_grid.vertex_values()[0], raw)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        # checkpoints written before the grids were renamed call them "density" and "features"
+        for old, new in (("density.", "density_grid."), ("features.", "feature_grid.")):
+            for key in [k for k in state_dict if k.startswith(prefix + old)]:
+                state_dict[prefix + new + key[len(prefix + old):]] = state_dict.pop(key)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

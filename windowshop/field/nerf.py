@@ -112,9 +112,19 @@ class NerfModel(RadianceModel):
                             aux={"rgb_coarse": coarse.rgb},
                             num_samples=rays * (t.shape[1] + t_fine.shape[1]))
 
+    @property
+    def _last_field(self) -> NerfField:
+        """The field whose densities and colours the render composites last (the fine one)."""
+        return self.coarse if self.fine is None else self.fine
+
+    def density(self, points: torch.Tensor) -> torch.Tensor:
+        # the density head never sees the direction: any unit vector will do
+        dirs = torch.zeros_like(points)
+        dirs[:, 2] = 1.0
+        return _query(self._last_field, points, dirs)[0]
+
+    def colour(self, points: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        return _query(self._last_field, points, directions)[1]
+
     def make_optimizer(self) -> torch.optim.Optimizer:
         return torch.optim.Adam(self.parameters(), lr=self.config.lr)
-
-    def lr_factor(self, progress: float) -> float:
-        """Exponential decay from `lr` to `lr_final` over the budget, as the paper."""
-        return (self.config.lr_final / self.config.lr) ** min(max(progress, 0.0), 1.0)

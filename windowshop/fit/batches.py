@@ -1,4 +1,5 @@
-"""Random batches of training rays drawn uniformly from the pixels of every training view.
+"""Random batches of training rays drawn uniformly from the pixels of every training view, and
+rays from cameras with no photo (for losses on views nobody took).
 
 Only the pixel colours live in memory; a batch's rays are computed from its pixels' cameras, so
 100 views of 400x400 cost their 192 MB of colour and nothing per ray.
@@ -12,7 +13,7 @@ import numpy as np
 import torch
 
 from windowshop.rays import pixel_directions, rays_from_directions
-from windowshop.scene.types import View
+from windowshop.scene.types import Camera, View
 
 
 @dataclass
@@ -31,6 +32,14 @@ class RayBatch:
         return self.rgb * self.alpha[:, None] + background * (1.0 - self.alpha[:, None])
 
 
+def camera_tables(cameras: list[Camera], device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Intrinsics fx, fy, cx, cy (V, 4) and camera-to-world matrices (V, 4, 4) of `cameras`."""
+    intrinsics = torch.tensor([[c.fx, c.fy, c.cx, c.cy] for c in cameras], dtype=torch.float32,
+                              device=device)
+    c2w = torch.tensor(np.stack([c.c2w for c in cameras]), dtype=torch.float32, device=device)
+    return intrinsics, c2w
+
+
 class PixelBank:
     """All pixels of `views` on `device`, flattened view after view, row-major within a view."""
 
@@ -45,10 +54,7 @@ class PixelBank:
         sizes = [v.camera.width * v.camera.height for v in views]
         self.starts = torch.tensor(np.cumsum([0] + sizes[:-1]), dtype=torch.long, device=device)
         self.widths = torch.tensor([v.camera.width for v in views], dtype=torch.long, device=device)
-        self.intrinsics = torch.tensor([[v.camera.fx, v.camera.fy, v.camera.cx, v.camera.cy]
-                                        for v in views], dtype=torch.float32, device=device)  # (V, 4)
-        self.c2w = torch.tensor(np.stack([v.camera.c2w for v in views]), dtype=torch.float32,
-                                device=device)  # (V, 4, 4)
+        self.intrinsics, self.c2w = camera_tables([v.camera for v in views], self.device)
 
     def __len__(self) -> int:
         return self.rgb.shape[0]
@@ -68,3 +74,27 @@ class PixelBank:
     def sample(self, n: int) -> RayBatch:
         """`n` rays through pixels drawn uniformly with replacement (torch's global generator)."""
         return self.rays(torch.randint(len(self), (n,), device=self.device))
+
+
+class CameraRays:
+    """Rays through uniformly random points of the images of `cameras`, which need no photo.
+
+    Draws from its own generator (seeded by `seed`), so using it leaves the training batches as
+    they would have been.
+    """
+
+    def __init__(self, cameras: list[Camera], device: torch.device | str, seed: int = 0):
+        if not cameras:
+            raise ValueError("CameraRays needs at least one camera")
+        self.device = torch.device(device)
+        self.intrinsics, self.c2w = camera_tables(cameras, self.device)
+        self.sizes = torch.tensor([[c.width, c.height] for c in cameras], dtype=torch.float32,
+                                  device=self.device)  # (V, 2)
+        self.generator = torch.Generator(device=self.device).manual_seed(seed)
+
+    def sample(self, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """`n` rays: origins (n, 3) and unit directions (n, 3), cameras drawn uniformly."""
+        view = torch.randint(len(self.c2w), (n,), generator=self.generator, device=self.device)
+        uv = torch.rand(n, 2, generator=self.generator, device=self.device) * self.sizes[view]
+        fx, fy, cx, cy = self.intrinsics[view].unbind(-1)
+        return rays_from_directions(self.c2w[view], pixel_directions(fx, fy, cx, cy, uv[:, 0], uv[:, 1]))

@@ -1,10 +1,11 @@
 """The training loop every model shares, using only the `RadianceModel` contract.
 
-Each step draws `batch_rays` random rays across all training views, renders them over the scene's
-background (a random colour per ray for "alpha" scenes, the target composited over the same
-colour), steps the model's optimizer with its learning-rate factor at the current progress, and
-logs loss, PSNR and throughput. Progress is the larger of steps/iters and seconds/budget, so with
-`seconds` the schedule follows elapsed training time.
+Each step runs the model's schedule hooks (learning rate, grid growth, ...: fit/schedule.py),
+draws `batch_rays` random rays across all training views, renders them over the scene's background
+(a random colour per ray for "alpha" scenes, the target composited over the same colour), steps
+the optimizer on the loss terms its config asks for (fit/losses.py), and logs loss, PSNR and
+throughput. Progress is the larger of steps/iters and seconds/budget, so with `seconds` the
+schedule follows elapsed training time. Callers follow and stop a fit through `FitCallbacks`.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ import contextlib
 import json
 import math
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,12 +25,15 @@ from tqdm import tqdm
 from windowshop.config import FitConfig
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
-from windowshop.fit.batches import PixelBank
+from windowshop.fit.batches import CameraRays, PixelBank
+from windowshop.fit.callbacks import FitCallbacks, FitCancelled
 from windowshop.fit.checkpoint import LOG, load_checkpoint, save_checkpoint, scene_record, write_config
 from windowshop.fit.evaluate import EVAL_DIR, evaluate_views, held_out_views, write_metrics
+from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
+from windowshop.fit.schedule import Hook, StepInfo, schedule_for
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
-from windowshop.scene.types import BACKGROUNDS, Scene
+from windowshop.scene.types import BACKGROUNDS, Camera, Scene
 
 
 @dataclass
@@ -47,7 +52,8 @@ class Progress:
 
 @dataclass
 class TrainingRun:
-    """A training session: the model, its optimizer and budget, and where checkpoints go."""
+    """A training session: the model, its optimizer and budget, where checkpoints go, and the
+    hooks of the loop. `schedule` and `losses` default to the model's own (from its config)."""
 
     model: RadianceModel
     optimizer: torch.optim.Optimizer
@@ -55,21 +61,36 @@ class TrainingRun:
     record: dict  # scene_record of the training scene
     out_dir: Path
     progress: Progress
+    callbacks: FitCallbacks = field(default_factory=FitCallbacks)
+    schedule: list[Hook] | None = None
+    losses: list[LossTerm] | None = None
+    virtual: CameraRays | None = None  # rays from cameras with no photo, for `virtual` loss terms
+
+    def __post_init__(self) -> None:
+        if self.schedule is None:
+            self.schedule = schedule_for(self.model)
+        if self.losses is None:
+            self.losses = loss_terms(self.model.config)
 
     def checkpoint(self) -> None:
-        save_checkpoint(self.out_dir, self.model, self.optimizer, self.record, self.config,
-                        self.progress.step, self.progress.elapsed)
+        path = save_checkpoint(self.out_dir, self.model, self.optimizer, self.record, self.config,
+                               self.progress.step, self.progress.elapsed)
+        self.callbacks.checkpointed(path)
 
 
 def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         out_dir: str | Path, device: torch.device | str,
-        resume: str | Path | None = None,
-        show_progress: bool = True) -> dict:
+        resume: str | Path | None = None, show_progress: bool = True,
+        callbacks: FitCallbacks = FitCallbacks(), extra_losses: Sequence[LossTerm] = (),
+        virtual_cameras: Sequence[Camera] | None = None) -> dict:
     """Train `model_name` with `model_config` on `scene` into the run folder `out_dir`.
 
     With `resume` (a run folder) the model, optimizer, step and elapsed time come from its
     checkpoint and training carries on to the budget of `fit_config`. Returns the held-out metrics
-    (also written to `out_dir/metrics.json`).
+    (also written to `out_dir/metrics.json`). `callbacks` hear of every step and checkpoint; when
+    its `should_stop()` is true the run is checkpointed and `FitCancelled` raised (no evaluation).
+    `extra_losses` are added to the model's; those marked `virtual` are fed rays from
+    `virtual_cameras` (default: a turntable orbit of the training cameras), which need no photo.
     """
     if not fit_config.iters and not fit_config.seconds:
         raise UserError("give a training budget: --iters N or --seconds S")
@@ -87,11 +108,20 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     progress = _restore(model, optimizer, resume) if resume else Progress()
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
-    run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress)
+    losses = loss_terms(model_config, extra_losses)
+    virtual = None
+    if any(term.virtual for term in losses):  # only then: the orbit is fitted to the cameras
+        virtual = CameraRays(list(virtual_cameras or _orbit([v.camera for v in train_views])),
+                             device, seed=fit_config.seed + progress.step)
+    run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress, callbacks,
+                      losses=losses, virtual=virtual)
     write_config(out_dir, model_name, model_config, fit_config, run.record)
     bank = PixelBank(train_views, device, use_alpha=scene.background == "alpha")
     try:
         _train(run, bank, scene.background, show_progress)
+    except FitCancelled:
+        run.checkpoint()
+        raise
     except KeyboardInterrupt:
         run.checkpoint()
         raise UserError(f"interrupted at step {progress.step}; carry on with --resume {out_dir}")
@@ -114,6 +144,13 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
 
 
+def _orbit(cameras: list[Camera], frames: int = 120) -> list[Camera]:
+    """`frames` cameras on the turntable orbit of the training `cameras`, at their image size."""
+    from windowshop.video.paths import fit_orbit, orbit_cameras
+
+    return orbit_cameras(fit_orbit(cameras), frames, cameras[0].width, cameras[0].height)
+
+
 def _backgrounds(kind: str, rays: int, device: torch.device) -> torch.Tensor:
     """(rays, 3) background colours: the scene's own, or uniform random ones for "alpha"."""
     if kind == "alpha":
@@ -126,20 +163,21 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     model's own `batch_rays`) over the scene's `background` kind; advances `run.progress` and
     returns the step's log record."""
     model, optimizer, config, progress = run.model, run.optimizer, run.config, run.progress
-    fraction = progress.fraction(config)
+    info = StepInfo(model, optimizer, progress.step, progress.fraction(config))
     start = time.perf_counter()
-    for group in optimizer.param_groups:
-        group["lr"] = group["initial_lr"] * model.lr_factor(fraction)
-    model.before_step(progress.step, fraction)
+    for hook in run.schedule:
+        hook.before_step(info)
     rays = config.batch_rays or model.batch_rays
     batch = bank.sample(rays)
     bg = _backgrounds(background, rays, bank.device)
     target = batch.target(bg)
     out = model.render_rays(batch.origins, batch.directions, bg)
-    loss = model.loss(out, target)
+    loss = total_loss(run.losses, LossInput(model, out, target, bg, run.virtual))
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
+    for hook in run.schedule:
+        hook.after_step(info)
     error = float(torch.mean((out.rgb.detach() - target) ** 2))  # syncs, so the timing is true
     seconds = time.perf_counter() - start
     progress.step += 1
@@ -150,7 +188,8 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
 
 
 def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bool) -> None:
-    """Step until the budget is spent, logging to log.jsonl and checkpointing now and then."""
+    """Step until the budget is spent or the callbacks ask to stop (`FitCancelled`), logging to
+    log.jsonl, reporting each step and checkpointing now and then."""
     config, progress = run.config, run.progress
     run.model.train()
     total = config.iters if config.iters and not config.seconds else None
@@ -171,3 +210,6 @@ def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bo
                 log.flush()
             if progress.step % config.checkpoint_every == 0:
                 run.checkpoint()
+            run.callbacks.stepped(progress.fraction(config), stats)
+            if run.callbacks.stop_requested():
+                raise FitCancelled(progress.step, run.out_dir)

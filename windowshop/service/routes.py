@@ -58,6 +58,8 @@ class JobLinks(BaseModel):
     video: str | None  # once done
     poster: str | None
     frames: list[str]  # per-frame images of the turntable, in order
+    report: str | None = None  # the capture's quality report (JSON: advice, coverage, PSNR)
+    coverage: str | None = None  # where the photos were taken from (PNG)
 
 
 class JobStatus(BaseModel):
@@ -117,7 +119,9 @@ def job_status(request: Request, job: Job) -> JobStatus:
         created_at=job.created_at,
         links=JobLinks(video=f"{base}/video.mp4" if done else None,
                        poster=f"{base}/poster.jpg" if done else None,
-                       frames=[f"{base}/frames/{i}.jpg" for i in range(job.frames if done else 0)]))
+                       frames=[f"{base}/frames/{i}.jpg" for i in range(job.frames if done else 0)],
+                       report=f"{base}/report.json" if done else None,
+                       coverage=f"{base}/coverage.png" if done else None))
 
 
 class _LimitedBody:
@@ -236,6 +240,18 @@ def get_video(request: Request, job_id: str) -> FileResponse:
             summary="One frame of the turntable, as the video's poster")
 def get_poster(request: Request, job_id: str) -> FileResponse:
     return FileResponse(_result(request, job_id, "poster.jpg"), media_type="image/jpeg")
+
+
+@router.get("/jobs/{job_id}/report.json", responses=_REFUSALS,
+            summary="The capture's quality report: photos placed, held-out PSNR, coverage, advice")
+def get_report(request: Request, job_id: str) -> FileResponse:
+    return FileResponse(_result(request, job_id, "video_report.json"), media_type="application/json")
+
+
+@router.get("/jobs/{job_id}/coverage.png", response_class=FileResponse, responses=_REFUSALS,
+            summary="Where the photos were taken from around the object, unphotographed arcs in red")
+def get_coverage(request: Request, job_id: str) -> FileResponse:
+    return FileResponse(_result(request, job_id, "video_coverage.png"), media_type="image/png")
 
 
 @router.get("/jobs/{job_id}/frames/{index}.jpg", response_class=FileResponse, responses=_REFUSALS,

@@ -1,12 +1,19 @@
-"""Camera paths for the turntable: an orbit fitted to the training cameras, a spiral, or a file.
+"""Camera paths for the turntable: an orbit about the object's box, a spiral, or a file.
 
 Every path yields `windowshop.scene.types.Camera`s (OpenGL camera-to-world) in the run's normalised
-frame. The orbit is fitted from the cameras alone, not from the normalisation, so it keeps the
-object centred and upright for any capture:
-- centre: the point nearest to every camera's optical axis (least squares),
-- up: the direction most perpendicular to every camera's x (right) axis, since photos are taken
-  with the camera level; the average camera up when the right axes do not span a plane,
-- radius, elevation and field of view: the medians of the training views.
+frame. The orbit keeps the object centred, upright and framed for any capture:
+- centre: the centre of the object's box (the run's `aabb`),
+- up: the scene's own (+z of a normalised scene, found from the support plane or the cameras when
+  it was loaded), else the direction most perpendicular to every camera's x (right) axis, since
+  photos are taken with the camera level; the average camera up when those do not span a plane,
+- elevation: the median of the training views,
+- distance and zoom: one distance all round, and each frame's focal length, so the box's projection
+  fills 80% of every frame; the widest view keeps the photos' median field of view
+  (`windowshop.video.framing`),
+- azimuths: a full turn from the first training camera (plus `start_angle`) when the photos cover
+  at least 300 degrees about the up axis, else a swing across the covered arc and back
+  (`windowshop.video.coverage`), so the video never shows a side nobody photographed.
+The poster is the frame facing the densest cluster of training cameras.
 
 Camera-path files use nerfstudio's layout: top-level `render_width`, `render_height` (and `fps`,
 `seconds`), and `camera_path`, a list of `{"camera_to_world": 16 floats row-major, "fov": vertical
@@ -24,8 +31,11 @@ import numpy as np
 
 from windowshop.config import VideoOptions
 from windowshop.errors import UserError
+from windowshop.model import Bounds
 from windowshop.scene.cameras import look_at, nearest_point_to_axes, up_vector
 from windowshop.scene.types import Camera
+from windowshop.video import coverage
+from windowshop.video.framing import frame_box
 
 MAX_ELEVATION = 85.0  # degrees; looking straight down the up axis leaves "upright" undefined
 
@@ -45,12 +55,20 @@ class Orbit:
     elevation: float
     fov: float
 
-    def position(self, azimuth: float, elevation: float) -> np.ndarray:
-        """(3,) point of the sphere of `radius` at `azimuth`, `elevation` (degrees)."""
+    def direction(self, azimuth: float, elevation: float) -> np.ndarray:
+        """Unit vector (3,) from the centre towards `azimuth`, `elevation` (degrees)."""
         az, el = math.radians(azimuth), math.radians(elevation)
         side = np.cross(self.up, self.reference)
         horizontal = math.cos(az) * self.reference + math.sin(az) * side
-        return self.centre + self.radius * (math.cos(el) * horizontal + math.sin(el) * self.up)
+        return math.cos(el) * horizontal + math.sin(el) * self.up
+
+    def position(self, azimuth: float, elevation: float) -> np.ndarray:
+        """(3,) point of the sphere of `radius` at `azimuth`, `elevation` (degrees)."""
+        return self.centre + self.radius * self.direction(azimuth, elevation)
+
+    def azimuths(self, points: np.ndarray) -> np.ndarray:
+        """(N,) azimuths in [0, 360) degrees of `points` (N, 3) about the centre and up axis."""
+        return coverage.azimuths_about(points, self.centre, self.up, self.reference)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -62,17 +80,21 @@ def vertical_fov(camera: Camera) -> float:
     return math.degrees(2 * math.atan(camera.height / (2 * camera.fy)))
 
 
-def fit_orbit(cameras: list[Camera]) -> Orbit:
+def fit_orbit(cameras: list[Camera], centre: np.ndarray | None = None,
+              up: np.ndarray | None = None) -> Orbit:
     """The orbit of the training `cameras`: their centre, up axis and median radius/elevation.
 
+    `centre` (3,) replaces the point the cameras look at (the object's box centre, when known),
+    the unit `up` (3,) the up axis fitted to them (the scene's own, when known).
     `fov` is the median of each camera's narrower field of view; the turntable gives it to its own
     narrower side, so whatever the photos kept in frame stays in frame.
     """
     if not cameras:
         raise UserError("the run has no training cameras to fit a turntable orbit to")
     c2ws = np.stack([c.c2w for c in cameras]).astype(np.float64)
-    centre = nearest_point_to_axes(c2ws, prior=np.zeros(3))
-    up = up_vector(c2ws, method="level")
+    if centre is None:
+        centre = nearest_point_to_axes(c2ws, prior=np.zeros(3))
+    up = up_vector(c2ws, method="level") if up is None else _unit(np.asarray(up, dtype=np.float64))
     offsets = c2ws[:, :3, 3] - centre
     dist = np.linalg.norm(offsets, axis=1)
     elev = np.degrees(np.arcsin(np.clip(offsets @ up / np.maximum(dist, 1e-12), -1, 1)))
@@ -96,20 +118,15 @@ def pinhole(c2w: np.ndarray, width: int, height: int, fov: float) -> Camera:
                   c2w=np.asarray(c2w, dtype=np.float64))
 
 
-def orbit_cameras(orbit: Orbit, frames: int, width: int, height: int, start_angle: float = 0.0,
-                  elevations: np.ndarray | None = None) -> list[Camera]:
-    """`frames` cameras evenly spaced in azimuth over one turn, all looking at the centre.
-
-    The last frame stops one step short of the first, so the video loops without a repeated frame.
-    `elevations` (frames,) in degrees replace the orbit's constant elevation (the spiral).
-    """
-    if elevations is None:
-        elevations = np.full(frames, orbit.elevation)
-    elevations = np.clip(elevations, -MAX_ELEVATION, MAX_ELEVATION)
+def orbit_cameras(orbit: Orbit, azimuths: np.ndarray, elevations: np.ndarray, width: int,
+                  height: int, distances: np.ndarray, focals: np.ndarray) -> list[Camera]:
+    """Cameras at `azimuths`, `elevations` (F,) degrees and `distances` (F,) from the orbit's
+    centre, looking at it upright, with `focals` (F,) pixels (square pixels, centred)."""
     cameras = []
-    for k in range(frames):
-        eye = orbit.position(start_angle + 360.0 * k / frames, float(elevations[k]))
-        cameras.append(pinhole(look_at(eye, orbit.centre, orbit.up), width, height, orbit.fov))
+    for az, el, dist, focal in zip(azimuths, elevations, distances, focals):
+        eye = orbit.centre + dist * orbit.direction(float(az), float(el))
+        cameras.append(Camera(fx=float(focal), fy=float(focal), cx=width / 2, cy=height / 2,
+                              width=width, height=height, c2w=look_at(eye, orbit.centre, orbit.up)))
     return cameras
 
 
@@ -137,26 +154,79 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, height
 
 
-def turntable_path(train_cameras: list[Camera], options: VideoOptions) -> list[Camera]:
-    """The cameras of the video `options` describe: orbit, spiral or a camera-path file."""
+@dataclass(frozen=True)
+class TurntablePlan:
+    """The cameras of a turntable and what they show of the photographed object."""
+
+    cameras: list[Camera]
+    path: str  # "orbit", "spiral" or "file"
+    swing: bool  # across the photographed arc and back, instead of a full turn
+    covered_start: float  # degrees of azimuth from the first training camera where the photos begin
+    covered_span: float  # degrees of azimuth the photos cover (360 less their widest gap)
+    poster_frame: int  # the frame facing the densest cluster of training cameras
+
+    def summary(self) -> dict:
+        """The plan without its cameras, as JSON-ready numbers (for report.json)."""
+        return {"path": self.path, "swing": self.swing, "frames": len(self.cameras),
+                "covered_start_degrees": round(self.covered_start, 3),
+                "covered_span_degrees": round(self.covered_span, 3), "poster_frame": self.poster_frame}
+
+
+def _check(options: VideoOptions) -> None:
     if options.frames < 1:
         raise UserError(f"--frames must be at least 1, got {options.frames}")
-    if options.path not in ("orbit", "spiral"):
-        return read_camera_path(options.path)
-    orbit = fit_orbit(train_cameras)
     if options.radius is not None and options.radius <= 0:
         raise UserError(f"--radius must be positive, got {options.radius}")
     if options.fov is not None and not 0 < options.fov < 180:
         raise UserError(f"--fov must be between 0 and 180 degrees, got {options.fov}")
-    orbit = Orbit(centre=orbit.centre, up=orbit.up, reference=orbit.reference,
-                  radius=options.radius or orbit.radius,
-                  elevation=orbit.elevation if options.elevation is None else options.elevation,
-                  fov=options.fov or _vertical_fov_for(orbit.fov, options.width, options.height))
-    elevations = None
+
+
+def _framed_path(orbit: Orbit, azimuths: np.ndarray, options: VideoOptions, bounds: Bounds) -> list[Camera]:
+    """The orbit's cameras at `azimuths` (F,), framing the box of `bounds` (see module docstring)."""
+    width, height, frames = options.width, options.height, len(azimuths)
+    elevation = orbit.elevation if options.elevation is None else options.elevation
+    elevations = np.full(frames, elevation)
     if options.path == "spiral":
-        elevations = spiral_elevations(orbit.elevation, options.spiral_amplitude, options.frames)
-    return orbit_cameras(orbit, options.frames, options.width, options.height, options.start_angle,
-                         elevations)
+        elevations = spiral_elevations(elevation, options.spiral_amplitude, frames)
+    elevations = np.clip(elevations, -MAX_ELEVATION, MAX_ELEVATION)
+    fov = options.fov or _vertical_fov_for(orbit.fov, width, height)
+    directions = np.stack([orbit.direction(float(a), float(e)) for a, e in zip(azimuths, elevations)])
+    distances, focals = frame_box(bounds.aabb, orbit.centre, orbit.up, directions, width, height,
+                                  focal=height / (2 * math.tan(math.radians(fov) / 2)),
+                                  distance=options.radius, zoom=options.fov is None,
+                                  depth_range=(bounds.near, bounds.far))
+    return orbit_cameras(orbit, azimuths, elevations, width, height, distances, focals)
+
+
+def plan_turntable(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds,
+                   up: np.ndarray | None = None) -> TurntablePlan:
+    """The turntable `options` describe (orbit, spiral or a camera-path file) around the object
+    in `bounds` (its box, and the near/far the model renders within), and its coverage.
+
+    `up` (3,) is the scene's up axis; None fits one to the cameras.
+    """
+    _check(options)
+    centre = np.asarray(bounds.aabb, dtype=np.float64).mean(0)
+    orbit = fit_orbit(train_cameras, centre=centre, up=up)
+    seen = orbit.azimuths(np.stack([c.center for c in train_cameras]))
+    start, span = coverage.covered_arc(seen)
+    swing = options.path in ("orbit", "spiral") and span < coverage.FULL_TURN_SPAN and not options.full_turn
+    if options.path not in ("orbit", "spiral"):
+        cameras = read_camera_path(options.path)
+    else:
+        azimuths = (coverage.swing_azimuths(start, span, options.frames) if swing
+                    else coverage.turn_azimuths(options.start_angle, options.frames))
+        cameras = _framed_path(orbit, azimuths, options, bounds)
+    poster = coverage.best_covered_frame(orbit.azimuths(np.stack([c.center for c in cameras])), seen)
+    path = options.path if options.path in ("orbit", "spiral") else "file"
+    return TurntablePlan(cameras=cameras, path=path, swing=swing, covered_start=start,
+                         covered_span=span, poster_frame=poster)
+
+
+def turntable_path(train_cameras: list[Camera], options: VideoOptions, bounds: Bounds,
+                   up: np.ndarray | None = None) -> list[Camera]:
+    """The cameras of the turntable `options` describe around the object in `bounds`."""
+    return plan_turntable(train_cameras, options, bounds, up).cameras
 
 
 def write_camera_path(cameras: list[Camera], path: str | Path, fps: float = 30.0) -> Path:

@@ -1,13 +1,15 @@
 """The turntable: a trained model rendered along a camera path, frame by frame, into files.
 
 `render_run` is what `windowshop render`, the demo and the web service call; `render_turntable`
-does the work for any `RadianceModel` and list of cameras.
+does the work for any `RadianceModel` and list of cameras. `render_run` also says which path it
+took and how much of the object the photos covered, in its result and in the run's `render.json`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,9 +23,15 @@ from windowshop.config import VideoOptions
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
-from windowshop.scene.types import Camera
+from windowshop.scene.types import BACKGROUNDS, Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
-from windowshop.video.paths import turntable_path, write_camera_path
+from windowshop.video.paths import plan_turntable, write_camera_path
+
+NORMALISED_UP = (0.0, 0.0, 1.0)  # a normalised scene's up axis (SceneOptions.normalize)
+RENDER_SUMMARY = "render.json"  # in the run folder: the last turntable's path and coverage
+# The video's backgrounds: a scene colour, or "transparent", rendered over black (colour
+# premultiplied by alpha) and kept with its alpha.
+VIDEO_BACKGROUNDS = {**BACKGROUNDS, "transparent": BACKGROUNDS["black"]}
 
 
 @dataclass(frozen=True)
@@ -36,10 +44,17 @@ class TurntableResult:
     fps: float
     files: list[Path]
     render_seconds: float  # rendering and encoding, excluding loading the run
+    path: dict = dataclasses.field(default_factory=dict)  # render_run's TurntablePlan.summary()
+    background: str = "white"
 
     @property
     def frames_per_second(self) -> float:
         return self.frames / max(self.render_seconds, 1e-9)
+
+    def summary(self) -> dict:
+        """JSON-ready: frames, size, files, background, and the path and its coverage."""
+        return {"frames": self.frames, "width": self.width, "height": self.height, "fps": self.fps,
+                "files": [str(p) for p in self.files], "background": self.background, **self.path}
 
 
 def depth_range(cameras: list[Camera], bounds: Bounds) -> tuple[float, float]:
@@ -71,7 +86,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
     width, height = cameras[0].width, cameras[0].height
     if any((c.width, c.height) != (width, height) for c in cameras):
         raise ValueError("every camera of a video must have the same image size")
-    outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame, len(cameras) - 1))
+    outputs = dataclasses.replace(outputs, poster_frame=min(outputs.poster_frame or 0, len(cameras) - 1))
     start = time.perf_counter()
     tuner = ThreadTuner(model_device(model), trial_steps=2)  # ffmpeg takes a core too
     with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
@@ -93,31 +108,50 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
 def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs,
                device: torch.device | str = "cpu", progress: bool = True,
                on_frame: Callable[[int, int], None] | None = None) -> TurntableResult:
-    """The turntable of a run folder: its model along the path `options` describe, into `outputs`."""
-    from windowshop.fit.checkpoint import load_run
-    from windowshop.render.frames import display_background
+    """The turntable of a run folder: its model along the path `options` describe, into `outputs`.
 
+    The poster is the best-covered frame unless `outputs.poster_frame` names one. The result's
+    `path` (also written to the run's `render.json`) says whether the path swung across the
+    photographed arc instead of turning fully, and how many degrees the photos cover.
+    """
+    from windowshop.fit.checkpoint import load_run
+
+    if options.background not in VIDEO_BACKGROUNDS:
+        raise UserError(f"--background must be one of {', '.join(VIDEO_BACKGROUNDS)}, got {options.background!r}")
     run = load_run(run_dir, device)
-    cameras = turntable_path(run.train_cameras, options)
-    return render_turntable(run.model, cameras, outputs, options.fps,
-                            background=display_background(run.background), chunk=options.chunk,
-                            progress=progress, on_frame=on_frame)
+    up = np.array(NORMALISED_UP) if run.scene_options.normalize else None  # else fit to the cameras
+    plan = plan_turntable(run.train_cameras, options, run.bounds, up)
+    poster = plan.poster_frame if outputs.poster_frame is None else outputs.poster_frame
+    outputs = dataclasses.replace(outputs, poster_frame=poster,
+                                  transparent=options.background == "transparent")
+    result = render_turntable(run.model, plan.cameras, outputs, options.fps,
+                              background=VIDEO_BACKGROUNDS[options.background], chunk=options.chunk,
+                              progress=progress, on_frame=on_frame)
+    result = dataclasses.replace(result, path={**plan.summary(), "poster_frame": poster},
+                                 background=options.background)
+    (Path(run_dir) / RENDER_SUMMARY).write_text(json.dumps(result.summary(), indent=2) + "\n")
+    return result
 
 
 def default_outputs(out: str | Path, gif: bool | str = False, webp: bool | str = False,
                     depth: bool | str = False, poster: bool | str = False,
-                    frames_dir: str | Path | None = None, frames_format: str = "png") -> VideoOutputs:
-    """Outputs beside the MP4 `out`: True names a file after it (spin.gif, spin_depth.mp4,
-    spin_poster.jpg), a string is used as the file's path."""
+                    frames_dir: str | Path | None = None, frames_format: str = "png",
+                    transparent: bool = False) -> VideoOutputs:
+    """Outputs beside the video `out` (an H.264 .mp4, or a VP9 .webm, which keeps `transparent`
+    frames' alpha): True names a file after it (spin.gif, spin_depth.mp4, spin_poster.jpg, or
+    spin_poster.png when transparent), a string is used as the file's path."""
     out = Path(out)
 
     def pick(flag: bool | str, name: str) -> Path | None:
         return None if not flag else Path(flag) if isinstance(flag, str) else out.with_name(name)
 
-    return VideoOutputs(mp4=out, gif=pick(gif, f"{out.stem}.gif"), webp=pick(webp, f"{out.stem}.webp"),
+    webm = out.suffix.lower() == ".webm"
+    return VideoOutputs(mp4=None if webm else out, webm=out if webm else None,
+                        gif=pick(gif, f"{out.stem}.gif"), webp=pick(webp, f"{out.stem}.webp"),
                         depth=pick(depth, f"{out.stem}_depth.mp4"),
-                        poster=pick(poster, f"{out.stem}_poster.jpg"),
-                        frames_dir=Path(frames_dir) if frames_dir else None, frames_format=frames_format)
+                        poster=pick(poster, f"{out.stem}_poster.{'png' if transparent else 'jpg'}"),
+                        frames_dir=Path(frames_dir) if frames_dir else None, frames_format=frames_format,
+                        transparent=transparent)
 
 
 def render_command(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs,
@@ -126,6 +160,9 @@ def render_command(run_dir: str | Path, options: VideoOptions, outputs: VideoOut
     result = render_run(run_dir, options, outputs, device)
     print(f"{result.frames} frames {result.width}x{result.height} at {result.fps:g} fps, rendered at "
           f"{result.frames_per_second:.2f} frames/s on {device}")
+    if result.path.get("swing"):
+        print(f"the photos cover {result.path['covered_span_degrees']:.0f} degrees of the circle: the "
+              "turntable swings across them and back (--full-turn to go all the way round)")
     for path in [*result.files, *([outputs.frames_dir] if outputs.frames_dir else [])]:
         print(f"wrote {path}")
     return result

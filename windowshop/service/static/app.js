@@ -209,6 +209,27 @@ function showResult(status) {
   $("download").hidden = false;
   $("share").hidden = false;
   startSpin(status.links.frames);
+  showReport(status.links);
+}
+
+// What the photos gave and what to reshoot: the capture's quality report.
+async function showReport(links) {
+  const response = await fetch(links.report);
+  if (!response.ok) return;
+  const report = await response.json();
+  const psnr = report.held_out_psnr === null ? "" :
+    `, held-out photos reproduced at ${report.held_out_psnr.toFixed(1)} dB`;
+  $("quality-summary").textContent = `${report.placed} of ${report.photos} photos placed, ` +
+    `${Math.round(report.covered_degrees || 0)}° of the circle covered${psnr}.`;
+  $("quality-note").hidden = !report.note;
+  $("quality-note").textContent = report.note || "";
+  const list = $("advice");
+  list.replaceChildren(...report.advice.map((tip) => {
+    const item = document.createElement("li");
+    item.textContent = tip;
+    return item;
+  }));
+  $("coverage").src = links.coverage;
 }
 
 function startSpin(urls) {

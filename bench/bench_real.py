@@ -1,0 +1,152 @@
+"""`windowshop video` on every shared real capture, with the product's defaults, as JSON.
+
+    python bench/bench_real.py [--rows beer_can fruit dtu_skull kermit] [--photos 20] [--out FILE]
+
+Per capture: seconds per stage and in all, photos placed, the mask kind, the held-out PSNR (every
+8th photo, over white) and the same PSNR within the photo's object mask, and how clean the
+turntable's background is: the share of pixels outside the object's visual hull (carved from the
+training masks, projected into each turntable camera and grown by a few pixels) that the model
+renders with opacity above 0.1 (floaters, a slab of table, haze). 0 is clean.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from windowshop.config import PipelineConfig
+from windowshop.device import pick_device
+from windowshop.fit.checkpoint import load_run
+from windowshop.fit.evaluate import held_out_views, target_image
+from windowshop.metrics import psnr
+from windowshop.pipeline import make_video
+from windowshop.rays import project
+from windowshop.render.frames import render_camera
+from windowshop.scene import load_scene
+from windowshop.scene.hull import hull_points
+from windowshop.scene.types import Camera
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+OPAQUE = 0.1  # opacity that counts as something drawn
+GROW_PX = 3  # the hull's silhouette is grown by this many pixels (its voxels are coarse)
+CHECK_SIDE = 96  # turntable frames are checked at this size
+
+
+def spread(files: list[Path], count: int) -> list[Path]:
+    picks = np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)
+    return [files[i] for i in sorted(set(picks.tolist()))]
+
+
+def captures(count: int) -> dict[str, list[Path]]:
+    """Photos of each shared real capture (no poses, no masks given to the pipeline)."""
+    beer = sorted((DATA / "beer_can" / "images").glob("*.jpg"))
+    return {"beer_can": spread(beer, count),
+            "fruit": spread(sorted((DATA / "fruit" / "newfruit_small").glob("*.jpg")), count),
+            "dtu_skull": spread(sorted((DATA / "dtu_skull" / "images").glob("*.jpg")), count),
+            "kermit": sorted((DATA / "kermit").glob("*.jpg"))}
+
+
+def masked_psnr(run_dir: Path, device: torch.device) -> float | None:
+    """Mean PSNR of the held-out photos within their object masks (None without masks)."""
+    run = load_run(run_dir, device)
+    scene = load_scene(run.scene_source, run.scene_options)
+    scores = []
+    for view in held_out_views(scene):
+        if view.alpha is None:
+            return None
+        inside = view.alpha > 0.5
+        frame = render_camera(run.model, view.camera, (1.0, 1.0, 1.0))
+        scores.append(psnr(frame.rgb[inside], target_image(view, scene.background)[inside]))
+    return float(np.mean(scores)) if scores else None
+
+
+def silhouette(points: np.ndarray, camera: Camera, grow: int) -> np.ndarray:
+    """(H, W) bool: pixels the points (M, 3) project onto, grown by `grow` pixels."""
+    uv, depth = project(points, camera)
+    u, v = np.round(uv[depth > 0]).astype(int).T
+    hit = np.zeros((camera.height + 2 * grow, camera.width + 2 * grow), bool)
+    for du in range(-grow, grow + 1):  # a square brush: every pixel within `grow` of a point
+        for dv in range(-grow, grow + 1):
+            uu, vv = u + du + grow, v + dv + grow
+            ok = (uu >= 0) & (vv >= 0) & (uu < hit.shape[1]) & (vv < hit.shape[0])
+            hit[vv[ok], uu[ok]] = True
+    return hit[grow:-grow, grow:-grow]
+
+
+def unclean_share(run_dir: Path, turntable: list[Camera], device: torch.device) -> float | None:
+    """Share of the turntable's background (outside the grown visual hull) drawn opaque."""
+    run = load_run(run_dir, device)
+    scene = load_scene(run.scene_source, run.scene_options)
+    train = [v for v in scene.split("train") if v.alpha is not None]
+    if not train:
+        return None
+    lo, hi = np.asarray(scene.aabb, dtype=float)
+    points = hull_points([v.camera for v in train], [v.alpha for v in train], (lo + hi) / 2,
+                         float(np.max(hi - lo)) / 2 * 1.1)
+    if points is None:
+        return None
+    dirty, background = 0, 0
+    for camera in turntable:
+        scale = CHECK_SIDE / max(camera.width, camera.height)
+        small = camera.resized(round(camera.width * scale), round(camera.height * scale))
+        outside = ~silhouette(points, small, GROW_PX)
+        opacity = render_camera(run.model, small).opacity
+        dirty += int(np.sum((opacity > OPAQUE) & outside))
+        background += int(np.sum(outside))
+    return dirty / max(background, 1)
+
+
+def run_row(name: str, photos: list[Path], tmp: Path, device: torch.device) -> dict:
+    folder = tmp / name / "photos"
+    folder.mkdir(parents=True)
+    for path in photos:
+        (folder / path.name).symlink_to(path)
+    config = PipelineConfig()
+    start = time.perf_counter()
+    result = make_video(folder, tmp / name / "spin.mp4", config, device=device, show=False)
+    total = time.perf_counter() - start
+    report = json.loads((result.scene_dir / "report.json").read_text())
+    return {"photos": len(photos), "placed": report.get("placed"), "masks": report.get("masks"),
+            "seconds": {k: round(v, 2) for k, v in result.seconds.items()},
+            "total_seconds": round(total, 2),
+            "held_out_psnr": result.metrics.get("psnr"),
+            "held_out_psnr_in_mask": masked_psnr(result.run_dir, device),
+            "background_unclean": unclean_share(result.run_dir, result.cameras, device)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", nargs="+", default=["beer_can", "fruit", "dtu_skull", "kermit"])
+    parser.add_argument("--photos", type=int, default=20, help="photos taken from each capture")
+    parser.add_argument("--out", default=None, help="also write the JSON here")
+    args = parser.parse_args()
+    device = pick_device(None)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).parent).stdout.strip()
+    results = {"commit": commit, "machine": f"{platform.processor() or platform.machine()}, "
+               f"{os.cpu_count()} cores", "device": str(device), "rows": {}}
+    photos = captures(args.photos)
+    with tempfile.TemporaryDirectory(prefix="windowshop-bench-real-") as tmp:
+        for name in args.rows:
+            try:
+                results["rows"][name] = run_row(name, photos[name], Path(tmp), device)
+            except Exception as err:  # noqa: BLE001 - a capture that fails is a result too
+                results["rows"][name] = {"error": f"{type(err).__name__}: {err}"}
+            print(json.dumps({name: results["rows"][name]}), flush=True)
+    text = json.dumps(results, indent=2)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

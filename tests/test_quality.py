@@ -1,0 +1,59 @@
+"""The capture's quality report: camera angles, empty arcs, advice and the coverage plot."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.quality import advice, camera_angles, coverage_plot, empty_arcs, quality_report
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera, Scene, View
+
+
+def ring(azimuths_deg, elevation_deg=20.0, distance=3.0) -> list[Camera]:
+    cams = []
+    for az in np.radians(azimuths_deg):
+        el = np.radians(elevation_deg)
+        eye = distance * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        cams.append(Camera(fx=50, fy=50, cx=32, cy=32, width=64, height=64,
+                           c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))))
+    return cams
+
+
+def test_angles_are_measured_from_the_first_photo_about_up():
+    az, el = camera_angles(ring([30, 120, 300], elevation_deg=40), np.zeros(3))
+    assert az == pytest.approx([0, 90, 270], abs=1e-6) and el == pytest.approx([40, 40, 40], abs=1e-6)
+
+
+def test_empty_arcs_wrap_around_the_circle():
+    assert empty_arcs(np.array([0, 30, 60, 90, 200, 230])) == [(90.0, 200.0), (230.0, 0.0)]
+    assert empty_arcs(np.arange(0, 360, 30)) == []  # photos every 30°: nothing to walk again
+
+
+def test_advice_names_the_photos_and_the_side_to_reshoot():
+    tips = advice({"unplaced": ["IMG_7.jpg"], "dropped": {"IMG_3.jpg": "blurred (sharpness 2% of "
+                   "the median)", "IMG_4.jpg": "duplicate of IMG_2.jpg", "IMG_9.jpg": "too blurred"},
+                   "empty_arcs": [(120.0, 200.0)], "placed": 8, "elevations": [5.0, 6.0],
+                   "masks": "segmented", "held_out_psnr": 25.0})
+    assert "photo IMG_7.jpg could not be placed" in tips[0]
+    assert "photos IMG_3.jpg and IMG_9.jpg are blurred" in tips[1]
+    assert "no photos between 120° and 200° around the object: walk that side again" in tips
+    assert any("only 8 photos" in t for t in tips) and any("higher up" in t for t in tips)
+    assert advice({"placed": 30, "elevations": [10, 35], "masks": "segmented", "empty_arcs": [],
+                   "held_out_psnr": 28.0}) == []  # a good capture gets no advice
+
+
+def test_report_of_a_one_sided_capture(tmp_path):
+    cams = ring(np.linspace(0, 140, 8))
+    views = [View(c, np.zeros((64, 64, 3), np.float32), "train", f"v{i}") for i, c in enumerate(cams)]
+    scene = Scene(views=views, format="hand", source=tmp_path, aabb=np.array([[-1.0] * 3, [1.0] * 3]),
+                  near=1, far=5)
+    render = {"swing": True, "covered_span_degrees": 140.0}
+    report = quality_report(scene, {"psnr": 18.5, "test_views": 1}, render, None)
+    assert report["empty_arcs"] == [(140.0, 0.0)] and report["placed"] == 8
+    assert "swings across that arc" in report["note"]
+    assert any("140° and 0°" in t for t in report["advice"])
+    assert any("18.5 dB" in t for t in report["advice"])
+    plot = coverage_plot(tmp_path / "coverage.png", report)
+    assert Image.open(plot).size[0] > 100

@@ -1,0 +1,118 @@
+"""Training schedules as hooks: what changes with progress, decided here, done by the model.
+
+The trainer calls every hook's `before_step` before a step's batch is rendered and `after_step`
+once the optimizer has stepped, with the step number and the budget's fraction used. A model keeps
+the primitive operations (the fast model's `grow(shape)` and `refresh_occupancy()`); its schedule
+(`SCHEDULES[model.name]`) decides when. A new schedule is one hook class and one line there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from windowshop.model import RadianceModel
+
+
+@dataclass
+class StepInfo:
+    """Where training stands as a hook sees it."""
+
+    model: RadianceModel
+    optimizer: torch.optim.Optimizer
+    step: int  # steps taken before this one
+    fraction: float  # of the budget used, in [0, inf)
+
+
+class Hook:
+    """A schedule: override either or both."""
+
+    def before_step(self, info: StepInfo) -> None:
+        pass
+
+    def after_step(self, info: StepInfo) -> None:
+        pass
+
+
+def exponential(final: float) -> Callable[[float], float]:
+    """The factor falling from 1 at progress 0 to `final` at 1 (clamped to [0, 1])."""
+    return lambda fraction: final ** min(max(fraction, 0.0), 1.0)
+
+
+@dataclass
+class LearningRate(Hook):
+    """Every group's `lr` = its `initial_lr` times `factor(fraction)`."""
+
+    factor: Callable[[float], float]
+
+    def before_step(self, info: StepInfo) -> None:
+        scale = self.factor(info.fraction)
+        for group in info.optimizer.param_groups:
+            group["lr"] = group["initial_lr"] * scale
+
+
+def grid_fraction(fraction: float, growth: tuple[float, ...], start: float) -> float:
+    """The share of the final voxel count at `fraction`: `start` at first, multiplied by the same
+    factor at each `growth` point passed, reaching 1 at the last."""
+    if not growth:
+        return 1.0
+    done = sum(fraction >= p for p in growth)
+    return start ** (1.0 - done / len(growth))
+
+
+@dataclass
+class GridGrowth(Hook):
+    """Grow the model's grids (`model.lattice(share)`, `model.grow(shape)`) at each growth point."""
+
+    growth: tuple[float, ...]
+    start: float
+
+    def before_step(self, info: StepInfo) -> None:
+        shape = info.model.lattice(grid_fraction(info.fraction, self.growth, self.start))
+        if shape != info.model.grid_shape:
+            info.model.grow(shape)
+
+
+@dataclass
+class OccupancyRefresh(Hook):
+    """`model.refresh_occupancy()` every `every` steps from step `warmup` on, and at once after
+    the grids grew (growth marks every new cell occupied)."""
+
+    warmup: int
+    every: int
+    seen: tuple[int, int, int]  # the lattice at the last call (at first: the model's)
+
+    def before_step(self, info: StepInfo) -> None:
+        shape = info.model.grid_shape
+        grew, self.seen = shape != self.seen, shape
+        if info.step >= self.warmup and (grew or info.step % self.every == 0):
+            info.model.refresh_occupancy()
+
+
+def nerf_schedule(model: RadianceModel) -> list[Hook]:
+    """The paper's: learning rate decayed exponentially from `lr` to `lr_final`."""
+    return [LearningRate(exponential(model.config.lr_final / model.config.lr))]
+
+
+def fast_schedule(model: RadianceModel) -> list[Hook]:
+    """Learning rates decayed to `lr_final` of their start; grids grown coarse to fine, the
+    occupancy grid refreshed (order matters: a refresh follows the growth of the same step)."""
+    config = model.config
+    return [LearningRate(exponential(config.lr_final)),
+            GridGrowth(config.growth, config.start_fraction),
+            OccupancyRefresh(config.occupancy_warmup, config.occupancy_every, model.grid_shape)]
+
+
+# model name -> its schedule, built for a model as it stands (fresh, or restored to resume)
+SCHEDULES: dict[str, Callable[[RadianceModel], list[Hook]]] = {
+    "nerf": nerf_schedule,
+    "fast": fast_schedule,
+}
+
+
+def schedule_for(model: RadianceModel) -> list[Hook]:
+    """The hooks of `model`'s schedule, in call order (none for a model without one)."""
+    make = SCHEDULES.get(model.name)
+    return make(model) if make else []

@@ -1,0 +1,154 @@
+"""The quality report of one capture: what was used, how well it came out, and what to reshoot.
+
+`quality_report` gathers the prepare report (photos used, dropped and unplaced, with reasons), the
+fit's held-out PSNR (every 8th photo is held out), where the cameras stood around the object
+(azimuth and elevation about its centre and the scene's up, +z) and what the turntable could show
+(the covered arc), and turns them into concrete advice. `coverage_plot` draws the cameras'
+azimuth and elevation with the unphotographed arcs marked. `windowshop video` prints the advice and
+writes both beside the video; the service shows them on the job's page.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from windowshop.scene.types import Camera, Scene
+from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about
+
+GAP_DEGREES = 60.0  # an empty arc of azimuth at least this wide is worth walking again
+FEW_PHOTOS = 12  # placed photos under this: advise more
+LOW_PSNR = 20.0  # held-out PSNR (dB) under this: the model does not reproduce the photos
+HIGH_ENOUGH = 20.0  # degrees of elevation: without a photo above this the top is a guess
+FLAT = 10.0  # degrees: elevations all within this band came from one height
+
+
+def camera_angles(cameras: list[Camera], centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(azimuths, elevations) in degrees (N,) of the cameras about `centre` (3,), up = +z; azimuth 0
+    is the first camera's direction, growing counter-clockwise seen from above."""
+    centres = np.stack([c.center for c in cameras]) - centre
+    up = np.array([0.0, 0.0, 1.0])
+    flat = centres[0] - (centres[0] @ up) * up
+    reference = flat / np.linalg.norm(flat) if np.linalg.norm(flat) > 1e-9 else np.array([1.0, 0, 0])
+    azimuths = azimuths_about(centres, np.zeros(3), up, reference)
+    elevations = np.degrees(np.arcsin(np.clip(centres @ up / np.linalg.norm(centres, axis=1), -1, 1)))
+    return azimuths, elevations
+
+
+def empty_arcs(azimuths: np.ndarray, min_gap: float = GAP_DEGREES) -> list[tuple[float, float]]:
+    """(from, to) degrees of every arc of azimuth at least `min_gap` wide with no camera, in order."""
+    a = np.sort(np.asarray(azimuths, dtype=float) % 360.0)
+    gaps = np.diff(np.append(a, a[0] + 360.0))
+    return [(float(a[i]), float((a[i] + gaps[i]) % 360.0)) for i in range(len(a)) if gaps[i] >= min_gap]
+
+
+def advice(report: dict) -> list[str]:
+    """Concrete things to do better, from a quality report's facts (most important first)."""
+    tips = []
+    if report.get("unplaced"):
+        tips.append(f"{_names(report['unplaced'])} could not be placed: retake them so each shares "
+                    "most of its view with the photo before it")
+    blurred = [name for name, why in report.get("dropped", {}).items() if "blur" in why]
+    if blurred:
+        tips.append(f"{_names(blurred)} {'is' if len(blurred) == 1 else 'are'} blurred: hold the "
+                    "phone still or use more light")
+    for start, end in report.get("empty_arcs", []):
+        tips.append(f"no photos between {start:.0f}° and {end:.0f}° around the object: walk that "
+                    "side again")
+    if report.get("placed", FEW_PHOTOS) < FEW_PHOTOS:
+        tips.append(f"only {report['placed']} photos were placed: 20-40 all round give a sharper model")
+    elevations = report.get("elevations")
+    if elevations and max(elevations) < HIGH_ENOUGH:
+        tips.append("no photo looks down on the object: add a few from higher up")
+    elif elevations and np.ptp(elevations) < FLAT:
+        tips.append("every photo is from the same height: add a ring from higher or lower")
+    if report.get("masks") == "none":
+        tips.append("the object could not be told from its surroundings: shoot it on a plain, "
+                    "uncluttered surface with space around it")
+    psnr = report.get("held_out_psnr")
+    if psnr is not None and psnr < LOW_PSNR:
+        tips.append(f"held-out photos are reproduced at only {psnr:.1f} dB: more photos, sharper "
+                    "photos and even light help")
+    return tips
+
+
+def _names(names: list[str]) -> str:
+    names = [Path(n).name for n in names]
+    head = ", ".join(names[:-1])
+    return f"photo {names[0]}" if len(names) == 1 else f"photos {head} and {names[-1]}"
+
+
+def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | None) -> dict:
+    """The report of a capture: `prepared` is prepare's report.json (None for a posed scene),
+    `metrics` the fit's held-out metrics, `render` the turntable's summary (its path plan)."""
+    train = scene.split("train")
+    centre = np.asarray(scene.aabb, dtype=float).mean(axis=0)
+    azimuths, elevations = camera_angles([v.camera for v in scene.views], centre)
+    report = {
+        "photos": (prepared or {}).get("used", len(scene.views)),
+        "placed": (prepared or {}).get("placed", len(scene.views)),
+        "unplaced": (prepared or {}).get("unplaced", []),
+        "dropped": (prepared or {}).get("dropped", {}),
+        "masks": (prepared or {}).get("masks", "alpha" if scene.background == "alpha" else "none"),
+        "train_photos": len(train),
+        "held_out_photos": metrics.get("test_views", 0),
+        "held_out_psnr": metrics.get("psnr"), "held_out_ssim": metrics.get("ssim"),
+        "azimuths": [round(float(a), 1) for a in azimuths],
+        "elevations": [round(float(e), 1) for e in elevations],
+        "empty_arcs": [(round(s, 1), round(e, 1)) for s, e in empty_arcs(azimuths)],
+        "covered_degrees": render.get("covered_span_degrees"),
+        "turntable": render,
+    }
+    if render.get("swing"):
+        report["note"] = (f"the photos cover {render['covered_span_degrees']:.0f}° of the circle "
+                          f"(under {FULL_TURN_SPAN:.0f}°): the turntable swings across that arc and "
+                          "back instead of showing a side nobody photographed")
+    report["advice"] = advice(report)
+    return report
+
+
+def summary_lines(report: dict) -> list[str]:
+    """The report for a terminal: a line of facts, the note, then each piece of advice."""
+    psnr = report["held_out_psnr"]
+    lines = [f"{report['placed']} of {report['photos']} photos placed, "
+             f"{report['covered_degrees'] or 0:.0f}° of the circle covered, held-out PSNR "
+             + (f"{psnr:.1f} dB on {report['held_out_photos']} photos" if psnr is not None
+                else "n/a (no photo held out)")]
+    if "note" in report:
+        lines.append(f"  note: {report['note']}")
+    lines += [f"  advice: {tip}" for tip in report["advice"]]
+    return lines
+
+
+def coverage_plot(out: Path, report: dict) -> Path:
+    """Where the cameras stood: azimuth around a polar plot, elevation as the distance from its
+    rim (the top of the object at the centre); the empty arcs shaded red. Written to PNG `out`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(4.2, 4.2))
+    ax = fig.add_subplot(projection="polar")
+    az = np.radians(report["azimuths"])
+    ax.scatter(az, 90.0 - np.asarray(report["elevations"]), s=18, color="tab:blue", zorder=3)
+    for start, end in report["empty_arcs"]:
+        span = (end - start) % 360.0
+        ax.bar(np.radians(start + span / 2), 90, width=np.radians(span), bottom=0, color="tab:red",
+               alpha=0.15, zorder=1)
+    ax.set_ylim(0, 90)
+    ax.set_yticks([30, 60, 90], labels=["60°", "30°", "0°"])
+    ax.set_title("cameras around the object (red: not photographed)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return out
+
+
+def write_quality_report(out: Path, report: dict) -> tuple[Path, Path]:
+    """`out` (report JSON) and the coverage plot beside it (`<stem>_coverage.png`)."""
+    out.write_text(json.dumps(report, indent=2) + "\n")
+    plot = coverage_plot(out.with_name(f"{out.stem.removesuffix('_report')}_coverage.png"), report)
+    return out, plot

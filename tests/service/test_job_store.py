@@ -1,6 +1,6 @@
 """The job-store contract (service/store.py), the same assertions on both stores: the SQLite store of
-one machine, and the cluster's SQLAlchemy store on SQLite and on PostgreSQL (started as in
-test_distributed_store.py, skipped where PostgreSQL is not installed)."""
+one machine, and the cluster's SQLAlchemy store on SQLite and on PostgreSQL (tests/conftest.py's
+server, skipped where PostgreSQL is not installed)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from typing import Callable
 
 import pytest
 
-from test_distributed_store import postgres_url  # noqa: F401  (the module's PostgreSQL server)
 from windowshop.distributed.store import PREPARE, ClusterStore
 from windowshop.service.db import SQLiteJobStore
 from windowshop.service.store import CANCELLED, QUEUED, RUNNING, JobStore

@@ -1,0 +1,144 @@
+"""The surface the object stands on: a plane fitted by RANSAC to the sparse points around the
+object, "up" as its normal, and the object's points as those standing above it.
+
+A support plane is opaque: the cameras are all on one side of it and no point is ever seen
+beneath it. That, not the photos' roll, tells a table from a plane through the object itself,
+so "up" holds for photos taken at any roll. Without such a plane, up falls back to the cameras.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from windowshop.errors import UserError
+from windowshop.photos.objectbox import MOST_VIEWS, NEAR_TARGET, seen_counts
+from windowshop.scene import normalize
+from windowshop.scene.cameras import nearest_point_to_axes
+from windowshop.scene.types import Camera
+
+TOLERANCE = 0.01  # inlier distance, as a share of the median camera distance to the object
+TRIALS = 400  # RANSAC hypotheses
+CAMERA_SIDE = 0.9  # at least this share of the cameras must lie above a support plane
+BELOW_WEIGHT = 2.0  # each point seen beneath a hypothesis cancels this many inliers
+MIN_SHARE = 0.1  # a plane needs this share of the points near the object ...
+MIN_INLIERS = 30  # ... and at least this many inliers
+ABOVE = 3.0  # the object's points stand more than this many tolerances above the plane
+FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
+MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
+ADVICE = ("photograph one object standing on a surface, walking around it and keeping it in "
+          "the middle of every photo")
+
+
+@dataclass(frozen=True)
+class Plane:
+    """n . x = offset; `normal` (3,) unit, pointing to the cameras' side."""
+
+    normal: np.ndarray
+    offset: float
+    tolerance: float  # inlier distance, world units
+    inlier_share: float  # share of the points near the object that lie on it
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        """(N,) signed distance of `points` (N, 3) above the plane."""
+        return points @ self.normal - self.offset
+
+
+@dataclass(frozen=True)
+class Isolated:
+    """The support plane (None if none was found), up, and the object's sparse points."""
+
+    plane: Plane | None
+    up: np.ndarray  # (3,) unit
+    index: np.ndarray  # (Q,) int: which of the points given are the object's
+
+
+def capture_scale(cameras: list[Camera]) -> tuple[np.ndarray, float]:
+    """(the point the cameras look at (3,), their median distance to it)."""
+    c2ws = np.stack([c.c2w for c in cameras])
+    target = nearest_point_to_axes(c2ws)
+    return target, float(np.median(np.linalg.norm(c2ws[:, :3, 3] - target, axis=-1)))
+
+
+def _score(normal: np.ndarray, offset: float, points: np.ndarray, centres: np.ndarray,
+           tol: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """(score, normal, inliers (N,) bool) of one hypothesis, the normal turned to the cameras."""
+    if np.median(centres @ normal - offset) < 0:
+        normal, offset = -normal, -offset
+    if np.mean(centres @ normal - offset > tol) < CAMERA_SIDE:
+        return -np.inf, normal, np.zeros(len(points), dtype=bool)
+    height = points @ normal - offset
+    inliers = np.abs(height) <= tol
+    return inliers.sum() - BELOW_WEIGHT * np.sum(height < -ABOVE * tol), normal, inliers
+
+
+def _through(sample: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(normal (3,), offset) of the plane through three points (3, 3), None if degenerate."""
+    normal = np.cross(sample[1] - sample[0], sample[2] - sample[0])
+    length = np.linalg.norm(normal)
+    if length < 1e-12:
+        return None
+    normal = normal / length
+    return normal, float(normal @ sample[0])
+
+
+def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Plane | None:
+    """The plane (RANSAC, then least squares on its inliers) the object stands on, among the
+    points (P, 3) near the cameras' look-at point; None when no plane qualifies."""
+    target, distance = capture_scale(cameras)
+    near = points[np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance]
+    tol = TOLERANCE * distance
+    centres = np.stack([c.center for c in cameras])
+    if len(near) < MIN_INLIERS:
+        return None
+    rng = np.random.default_rng(seed)
+    best = (-np.inf, None, None)
+    for _ in range(TRIALS):
+        plane = _through(near[rng.choice(len(near), 3, replace=False)])
+        if plane is not None:
+            score, normal, inliers = _score(*plane, near, centres, tol)
+            if score > best[0]:
+                best = (score, normal, inliers)
+    score, normal, inliers = best
+    if normal is None or inliers.sum() < max(MIN_INLIERS, MIN_SHARE * len(near)):
+        return None
+    on = near[inliers]
+    refined = np.linalg.svd(on - on.mean(0))[2][-1]
+    refined = refined if refined @ normal > 0 else -refined
+    offset = float(refined @ on.mean(0))
+    share = float(np.mean(np.abs(near @ refined - offset) <= tol))
+    return Plane(normal=refined, offset=offset, tolerance=tol, inlier_share=share)
+
+
+def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolated:
+    """Support plane, up and the object's points (see the module docstring) of a capture.
+
+    UserError when no object stands out: nearly every point lies on one surface, or none that
+    most views see stands above it.
+    """
+    plane = fit_support_plane(points, cameras, seed)
+    if plane is not None and plane.inlier_share >= FLAT_SHARE:
+        raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
+                        f"middle of the photos lie on one flat surface (a wall, a floor or an "
+                        f"empty table); {ADVICE}")
+    if plane is None:
+        up = normalize.up_vector(np.stack([c.c2w for c in cameras]))
+        chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
+    else:
+        up = plane.normal
+        chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
+    if len(chosen) < MIN_OBJECT_POINTS:
+        where = "stand above the surface the photos show" if plane else "sit where the photos meet"
+        raise UserError(f"no object found: only {len(chosen)} points that most photos see "
+                        f"{where} (at least {MIN_OBJECT_POINTS} are needed); {ADVICE}")
+    return Isolated(plane=plane, up=up, index=chosen)
+
+
+def _most_seen(points: np.ndarray, cameras: list[Camera], allowed: np.ndarray) -> np.ndarray:
+    """(Q,) indices of the `allowed` (P,) bool `points` (P, 3) near the look-at point that most
+    views see."""
+    target, distance = capture_scale(cameras)
+    near = allowed & (np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance)
+    index = np.flatnonzero(near)
+    return index[seen_counts(points[index], cameras) >= MOST_VIEWS * len(cameras)]

@@ -1,0 +1,170 @@
+"""Per-photo object masks on any background: GrabCut on colour, seeded by the object's own
+sparse points and its box, then made consistent across views through their visual hull.
+
+    object keypoints ──> sure object       box above the support plane ──> where it may be
+    other keypoints (the surface, the room) ──> sure background, and outside the box too
+    GrabCut per photo ──> masks ──visual hull (forgiving a few bad masks)──> a pixel stays the
+    object's only if its ray crosses the hull the other views carve
+
+Photos are handled in the normalised frame, where the box's floor is the support plane, so the
+hull (and every mask) stops at the surface the object stands on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from windowshop.rays import project
+from windowshop.scene.hull import GRID, hull_points
+from windowshop.scene.types import Camera
+
+ITERATIONS = 5  # GrabCut rounds
+MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (sure background beyond)
+CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
+SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
+HULL_TOLERANCE = 0.15  # a hull voxel survives this share of views missing it (imperfect masks)
+MIN_SEEDS = 5  # fewer object keypoints in a photo: its box outline seeds it alone
+
+
+@dataclass(frozen=True)
+class View:
+    """One placed photo and the sparse points it observes (pixels), camera in the normalised
+    frame."""
+
+    name: str
+    pixels: np.ndarray  # (H, W, 3) uint8 RGB
+    camera: Camera
+    object_uv: np.ndarray  # (K, 2) the object's points seen in this photo
+    background_uv: np.ndarray  # (B, 2) points off the object: the support surface, the room
+
+
+def _corners(aabb: np.ndarray) -> np.ndarray:
+    """(8, 3) corners of a box (2, 3)."""
+    return np.array([[x, y, z] for x in aabb[:, 0] for y in aabb[:, 1] for z in aabb[:, 2]])
+
+
+def _disks(shape: tuple[int, int], uv: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W) bool: disks of `radius` px around the pixels `uv` (N, 2) inside the image."""
+    out = np.zeros(shape, dtype=np.uint8)
+    for u, v in np.floor(uv).astype(int):
+        if 0 <= u < shape[1] and 0 <= v < shape[0]:
+            cv2.circle(out, (int(u), int(v)), radius, 1, -1)
+    return out > 0
+
+
+def _polygon(shape: tuple[int, int], uv: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the convex hull of the pixels `uv` (N, 2), N >= 3."""
+    out = np.zeros(shape, dtype=np.uint8)
+    cv2.fillConvexPoly(out, cv2.convexHull(np.round(uv).astype(np.int32)), 1)
+    return out > 0
+
+
+def box_outline(aabb: np.ndarray, camera: Camera, grow: float = MARGIN) -> np.ndarray:
+    """(H, W) bool: the projected box `aabb` (2, 3), grown by `grow` of the image diagonal;
+    the whole image when a camera sits inside or beside the box."""
+    shape = (camera.height, camera.width)
+    uv, depth = project(_corners(aabb), camera)
+    if np.any(depth <= 0):
+        return np.ones(shape, dtype=bool)
+    outline = _polygon(shape, uv)
+    radius = round(grow * np.hypot(*shape))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    return cv2.dilate(outline.astype(np.uint8), kernel) > 0
+
+
+def grabcut_mask(view: View, aabb: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the object in one photo by GrabCut, seeded as the module docstring says."""
+    shape = view.pixels.shape[:2]
+    diagonal = np.hypot(*shape)
+    outline = box_outline(aabb, view.camera)
+    seeds = np.full(shape, cv2.GC_PR_BGD, dtype=np.uint8)
+    seeds[~outline] = cv2.GC_BGD
+    if len(view.object_uv) >= 3:
+        seeds[_polygon(shape, view.object_uv) & outline] = cv2.GC_PR_FGD
+    else:  # no outline of the object's own: the box is all it has
+        seeds[outline] = cv2.GC_PR_FGD
+    radius = max(1, round(SEED_RADIUS * diagonal))
+    seeds[_disks(shape, view.background_uv, radius)] = cv2.GC_BGD
+    sure = _disks(shape, view.object_uv, radius) & outline
+    seeds[sure] = cv2.GC_FGD
+    rows, cols = _crop(outline, round(CONTEXT * diagonal))
+    crop = np.ascontiguousarray(seeds[rows, cols])
+    if not np.any(crop == cv2.GC_BGD) or not np.any((crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)):
+        return outline  # GrabCut needs both kinds; the box outline is the best guess left
+    image = np.ascontiguousarray(view.pixels[rows, cols, ::-1])  # OpenCV wants BGR
+    cv2.setRNGSeed(0)
+    cv2.grabCut(image, crop, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS,
+                cv2.GC_INIT_WITH_MASK)
+    mask = np.zeros(shape, dtype=bool)
+    mask[rows, cols] = (crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)
+    return _clean(mask, sure)
+
+
+def _crop(region: np.ndarray, pad: int) -> tuple[slice, slice]:
+    """Row and column slices of the bounding box of `region` (H, W) bool grown by `pad` px."""
+    rows, cols = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+    h, w = region.shape
+    return (slice(max(rows[0] - pad, 0), min(rows[-1] + pad + 1, h)),
+            slice(max(cols[0] - pad, 0), min(cols[-1] + pad + 1, w)))
+
+
+def _clean(mask: np.ndarray, sure: np.ndarray) -> np.ndarray:
+    """`mask` (H, W) bool as the parts that hold sure object pixels (or its largest part when
+    none does), holes filled: GrabCut's stray specks are background lookalikes."""
+    labels, count = ndimage.label(mask)
+    if not count:
+        return mask
+    keep = np.unique(labels[sure & mask])
+    keep = keep[keep > 0]
+    if not len(keep):
+        keep = [1 + int(np.argmax(ndimage.sum(mask, labels, index=np.arange(1, count + 1))))]
+    return ndimage.binary_fill_holes(np.isin(labels, keep))
+
+
+def hull_silhouette(points: np.ndarray, voxel: float, camera: Camera) -> np.ndarray:
+    """(H, W) bool: the pixels covered by voxels of side `voxel` centred at `points` (M, 3).
+
+    Each voxel is drawn as a square of its projected size, on a grid coarse enough that the
+    squares are a few pixels wide (fast), then brought back to full size."""
+    shape = (camera.height, camera.width)
+    uv, depth = project(points, camera)
+    front = depth > 1e-9
+    uv, depth = uv[front], depth[front]
+    if not len(uv):
+        return np.zeros(shape, dtype=bool)
+    size = voxel * camera.fx / depth  # projected voxel side, pixels
+    step = max(1, int(np.median(size) // 2))
+    small = np.zeros((-(-shape[0] // step), -(-shape[1] // step)), dtype=np.uint8)
+    cells = np.floor(uv / step).astype(int)
+    inside = (cells[:, 0] >= 0) & (cells[:, 1] >= 0) & (cells[:, 0] < small.shape[1]) \
+        & (cells[:, 1] < small.shape[0])
+    small[cells[inside, 1], cells[inside, 0]] = 1
+    reach = int(np.ceil(0.87 * size.max() / step))  # half the voxel's diagonal, in cells
+    small = cv2.dilate(small, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
+    full = np.repeat(np.repeat(small, step, 0), step, 1)
+    return full[:shape[0], :shape[1]] > 0
+
+
+def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
+               ) -> list[np.ndarray]:
+    """The `masks` (H, W) bool cut to the visual hull of them all (cameras in the frame of the
+    box `aabb` (2, 3); the hull stops at the box, whose floor is the support plane)."""
+    centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
+    points = hull_points(cameras, [m.astype(np.float32) for m in masks], centre, half,
+                         tolerance=HULL_TOLERANCE)
+    if points is None:
+        return masks  # the views disagree entirely: nothing to check against
+    points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
+    voxel = 2 * half / GRID
+    return [m & hull_silhouette(points, voxel, c) for m, c in zip(masks, cameras)]
+
+
+def segment(views: list[View], aabb: np.ndarray) -> dict[str, np.ndarray]:
+    """Photo name -> (H, W) bool object mask, for the `views` of an object in the box `aabb`."""
+    masks = [grabcut_mask(v, aabb) for v in views]
+    final = consistent(masks, [v.camera for v in views], aabb)
+    return {v.name: m for v, m in zip(views, final)}

@@ -32,7 +32,8 @@ from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconst
 from windowshop.scene import normalize
 from windowshop.scene.nerfstudio import WRITER_KEY
 
-BACKGROUND_GROW = 0.2  # sparse points this share of the box size outside it are background
+SEARCH_GROW = 0.3  # masks are sought in the points' box grown by this share of its size ...
+BACKGROUND_GROW = 0.2  # ... and sparse points this share of the box size outside that are not it
 MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
 # Share of the "prepare" progress each stage covers (retries add time but no progress).
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
@@ -166,24 +167,34 @@ def _labels(points: np.ndarray, ids: np.ndarray, isolated: plane.Isolated,
     return labels
 
 
-def find_masks(views: list[segment.View], aabb: np.ndarray, matting: str
-               ) -> tuple[dict[str, np.ndarray], str]:
-    """(photo name -> (H, W) bool mask, how they were made: "rembg", "colour" or "segmented").
+def find_masks(views: list[segment.View], search: np.ndarray, matting: str
+               ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None]:
+    """(photo name -> (H, W) bool mask, how they were made: "rembg", "colour" or "segmented",
+    the object's box (2, 3) from the masks' visual hull, or None) for an object in `search`.
 
     A learned matting backend when asked for; else colour on a plain background; else GrabCut
     seeded by the object's points. All are made consistent across views (segment.consistent).
     """
-    cameras = [v.camera for v in views]
     if matting == "rembg":
         masks, kind = matting_rembg.masks([v.pixels for v in views]), "rembg"
     elif (colour := objectbox.background_colour([v.pixels for v in views])) is not None:
-        masks = [objectbox.foreground_mask(v.pixels, colour, objectbox.box_region(aabb, v.camera))
+        masks = [objectbox.foreground_mask(v.pixels, colour, objectbox.box_region(search, v.camera))
                  for v in views]
         kind = "colour"
     else:
-        masks, kind = [segment.grabcut_mask(v, aabb) for v in views], "segmented"
-    final = segment.consistent(masks, cameras, aabb)
-    return {v.name: m for v, m in zip(views, final)}, kind
+        masks, kind = segment.segment(views, search), "segmented"
+    final, box = segment.consistent(masks, [v.camera for v in views], search)
+    return {v.name: m for v, m in zip(views, final)}, kind, box
+
+
+def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
+    """(2, 3) `aabb` grown by SEARCH_GROW of its size on each side (featureless parts of the
+    object have no points), except a floor on the support plane."""
+    grow = SEARCH_GROW * (aabb[1] - aabb[0])
+    search = np.stack([aabb[0] - grow, aabb[1] + grow])
+    if floor:
+        search[0, 2] = aabb[0, 2]
+    return search
 
 
 def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions) -> Located:
@@ -195,19 +206,22 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
     isolated = plane.isolate(points, cameras, options.seed)
     rotation = normalize.rotation_to_z(isolated.up)
-    chosen = points[isolated.index]
-    lo, hi = objectbox.object_box(chosen, cameras, rotation)
+    lo, hi = objectbox.object_box(points[isolated.index], cameras, rotation)
     if isolated.plane is not None:  # the object stands on the plane: the box's floor
         lo[2] = isolated.plane.offset + isolated.plane.tolerance
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
     found, kind = {}, "none"
     if options.masks:
-        views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, aabb))
-        found, kind = find_masks(views, aabb, options.matting)
+        search = _search_box(aabb, floor=isolated.plane is not None)
+        views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
+        found, kind, box = find_masks(views, search, options.matting)
+        if box is not None:  # the masks' hull bounds the object better than its points
+            refit, aabb = normalize.similarity(np.eye(3), *box)
+            posed, transform = output.normalised(posed, refit), refit @ transform
+    chosen = points[isolated.index] @ transform[:3, :3].T + transform[:3, 3]
     # with masks the model learns the object alone, over random backgrounds (Scene "alpha")
-    return Located(photos=posed, transform=transform, aabb=aabb,
-                   points=chosen @ transform[:3, :3].T + transform[:3, 3], masks=found,
+    return Located(photos=posed, transform=transform, aabb=aabb, points=chosen, masks=found,
                    mask_kind=kind, background="alpha" if found else "white",
                    plane=isolated.plane)
 

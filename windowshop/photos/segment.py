@@ -23,6 +23,7 @@ from windowshop.scene.hull import GRID, hull_points
 from windowshop.scene.types import Camera
 
 ITERATIONS = 5  # GrabCut rounds
+WORK_SIDE = 256  # GrabCut runs on the box's part of the photo scaled to at most this many pixels
 MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (sure background beyond)
 CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
@@ -92,16 +93,27 @@ def grabcut_mask(view: View, aabb: np.ndarray) -> np.ndarray:
     sure = _disks(shape, view.object_uv, radius) & outline
     seeds[sure] = cv2.GC_FGD
     rows, cols = _crop(outline, round(CONTEXT * diagonal))
-    crop = np.ascontiguousarray(seeds[rows, cols])
+    crop = seeds[rows, cols]
     if not np.any(crop == cv2.GC_BGD) or not np.any((crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)):
         return outline  # GrabCut needs both kinds; the box outline is the best guess left
-    image = np.ascontiguousarray(view.pixels[rows, cols, ::-1])  # OpenCV wants BGR
-    cv2.setRNGSeed(0)
-    cv2.grabCut(image, crop, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS,
-                cv2.GC_INIT_WITH_MASK)
     mask = np.zeros(shape, dtype=bool)
-    mask[rows, cols] = (crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)
+    mask[rows, cols] = _grabcut(view.pixels[rows, cols], crop)
     return _clean(mask, sure)
+
+
+def _grabcut(pixels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(h, w) bool foreground of GrabCut on `pixels` (h, w, 3) uint8 RGB from `seeds` (h, w)
+    (cv2.GC_* labels), run at most WORK_SIDE pixels wide (its time grows with the pixels)."""
+    h, w = seeds.shape
+    scale = min(1.0, WORK_SIDE / max(h, w))
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    image = cv2.resize(np.ascontiguousarray(pixels[..., ::-1]), size, interpolation=cv2.INTER_AREA)
+    labels = cv2.resize(seeds, size, interpolation=cv2.INTER_NEAREST)
+    cv2.setRNGSeed(0)
+    cv2.grabCut(image, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), ITERATIONS,
+                cv2.GC_INIT_WITH_MASK)
+    foreground = ((labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)).astype(np.uint8)
+    return cv2.resize(foreground, (w, h), interpolation=cv2.INTER_LINEAR) > 0
 
 
 def _crop(region: np.ndarray, pad: int) -> tuple[slice, slice]:
@@ -150,21 +162,23 @@ def hull_silhouette(points: np.ndarray, voxel: float, camera: Camera) -> np.ndar
 
 
 def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
-               ) -> list[np.ndarray]:
-    """The `masks` (H, W) bool cut to the visual hull of them all (cameras in the frame of the
-    box `aabb` (2, 3); the hull stops at the box, whose floor is the support plane)."""
+               ) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """(the `masks` (H, W) bool cut to the visual hull of them all, the hull's box (2, 3) or
+    None when nothing survives). Cameras are in the frame of the box `aabb` (2, 3) searched,
+    whose floor is the support plane."""
     centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
     points = hull_points(cameras, [m.astype(np.float32) for m in masks], centre, half,
                          tolerance=HULL_TOLERANCE)
-    if points is None:
-        return masks  # the views disagree entirely: nothing to check against
-    points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
+    if points is not None:
+        points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
+    if points is None or not len(points):
+        return masks, None  # the views disagree entirely: nothing to check against
     voxel = 2 * half / GRID
-    return [m & hull_silhouette(points, voxel, c) for m, c in zip(masks, cameras)]
+    box = np.stack([np.maximum(points.min(0) - voxel, aabb[0]), points.max(0) + voxel])
+    return [m & hull_silhouette(points, voxel, c) for m, c in zip(masks, cameras)], box
 
 
-def segment(views: list[View], aabb: np.ndarray) -> dict[str, np.ndarray]:
-    """Photo name -> (H, W) bool object mask, for the `views` of an object in the box `aabb`."""
-    masks = [grabcut_mask(v, aabb) for v in views]
-    final = consistent(masks, [v.camera for v in views], aabb)
-    return {v.name: m for v, m in zip(views, final)}
+def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:
+    """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3), by GrabCut
+    alone (consistent() then makes them agree)."""
+    return [grabcut_mask(v, aabb) for v in views]

@@ -77,28 +77,43 @@ def box_outline(aabb: np.ndarray, camera: Camera, grow: float = MARGIN) -> np.nd
     return cv2.dilate(outline.astype(np.uint8), kernel) > 0
 
 
+def _seed_points(seeds: np.ndarray, view: View, inside: np.ndarray) -> np.ndarray:
+    """`seeds` (H, W) with sure labels at the view's keypoints: background ones everywhere, the
+    object's where `inside` (H, W) bool allows."""
+    radius = max(1, round(SEED_RADIUS * np.hypot(*seeds.shape)))
+    seeds[_disks(seeds.shape, view.background_uv, radius)] = cv2.GC_BGD
+    seeds[_disks(seeds.shape, view.object_uv, radius) & inside] = cv2.GC_FGD
+    return seeds
+
+
 def grabcut_mask(view: View, aabb: np.ndarray) -> np.ndarray:
-    """(H, W) bool: the object in one photo by GrabCut, seeded as the module docstring says."""
-    shape = view.pixels.shape[:2]
-    diagonal = np.hypot(*shape)
+    """(H, W) bool: the object in one photo by GrabCut, seeded as the module docstring says:
+    anything inside the projected box may be the object, nothing outside it is."""
     outline = box_outline(aabb, view.camera)
-    seeds = np.full(shape, cv2.GC_PR_BGD, dtype=np.uint8)
-    seeds[~outline] = cv2.GC_BGD
-    if len(view.object_uv) >= 3:
-        seeds[_polygon(shape, view.object_uv) & outline] = cv2.GC_PR_FGD
-    else:  # no outline of the object's own: the box is all it has
-        seeds[outline] = cv2.GC_PR_FGD
-    radius = max(1, round(SEED_RADIUS * diagonal))
-    seeds[_disks(shape, view.background_uv, radius)] = cv2.GC_BGD
-    sure = _disks(shape, view.object_uv, radius) & outline
-    seeds[sure] = cv2.GC_FGD
-    rows, cols = _crop(outline, round(CONTEXT * diagonal))
+    seeds = np.where(outline, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8)
+    return _run(view, _seed_points(seeds, view, outline), outline)
+
+
+def refined_mask(view: View, mask: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+    """(H, W) bool: GrabCut again, now that the hull's `silhouette` (H, W) bool bounds the object
+    tightly: its background model then learns the colours right around the object (shadows,
+    the surface beside it) rather than the far room."""
+    seeds = np.where(silhouette, cv2.GC_PR_BGD, cv2.GC_BGD).astype(np.uint8)
+    seeds[mask & silhouette] = cv2.GC_PR_FGD
+    return _run(view, _seed_points(seeds, view, mask & silhouette), silhouette) & silhouette
+
+
+def _run(view: View, seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(H, W) bool: GrabCut from `seeds` on the part of the photo around `region` (H, W) bool."""
+    if not region.any():
+        return region
+    rows, cols = _crop(region, round(CONTEXT * np.hypot(*seeds.shape)))
     crop = seeds[rows, cols]
     if not np.any(crop == cv2.GC_BGD) or not np.any((crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)):
-        return outline  # GrabCut needs both kinds; the box outline is the best guess left
-    mask = np.zeros(shape, dtype=bool)
+        return region  # GrabCut needs both kinds; the region is the best guess left
+    mask = np.zeros(seeds.shape, dtype=bool)
     mask[rows, cols] = _grabcut(view.pixels[rows, cols], crop)
-    return _clean(mask, sure)
+    return _clean(mask, seeds == cv2.GC_FGD)
 
 
 def _grabcut(pixels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
@@ -161,24 +176,39 @@ def hull_silhouette(points: np.ndarray, voxel: float, camera: Camera) -> np.ndar
     return full[:shape[0], :shape[1]] > 0
 
 
-def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
-               ) -> tuple[list[np.ndarray], np.ndarray | None]:
-    """(the `masks` (H, W) bool cut to the visual hull of them all, the hull's box (2, 3) or
-    None when nothing survives). Cameras are in the frame of the box `aabb` (2, 3) searched,
-    whose floor is the support plane."""
+def carve(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
+          ) -> tuple[list[np.ndarray], np.ndarray] | None:
+    """(each camera's view of the visual hull of `masks` (H, W) bool, as (H, W) bool; the hull's
+    box (2, 3)), or None when nothing survives. Cameras are in the frame of the box `aabb`
+    (2, 3) searched, whose floor is the support plane; the hull stops at the box."""
     centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
     points = hull_points(cameras, [m.astype(np.float32) for m in masks], centre, half,
                          tolerance=HULL_TOLERANCE)
     if points is not None:
         points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
     if points is None or not len(points):
-        return masks, None  # the views disagree entirely: nothing to check against
+        return None
     voxel = 2 * half / GRID
     box = np.stack([np.maximum(points.min(0) - voxel, aabb[0]), points.max(0) + voxel])
-    return [m & hull_silhouette(points, voxel, c) for m, c in zip(masks, cameras)], box
+    return [hull_silhouette(points, voxel, c) for c in cameras], box
+
+
+def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
+               ) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """(the `masks` (H, W) bool cut to the visual hull of them all (see carve), the hull's box
+    (2, 3) or None when the views disagree entirely)."""
+    carved = carve(masks, cameras, aabb)
+    if carved is None:
+        return masks, None
+    silhouettes, box = carved
+    return [m & s for m, s in zip(masks, silhouettes)], box
 
 
 def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:
-    """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3), by GrabCut
-    alone (consistent() then makes them agree)."""
-    return [grabcut_mask(v, aabb) for v in views]
+    """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3): GrabCut in
+    each photo, then again within the visual hull of the first round's masks."""
+    masks = [grabcut_mask(v, aabb) for v in views]
+    carved = carve(masks, [v.camera for v in views], aabb)
+    if carved is None:
+        return masks
+    return [refined_mask(v, m, s) for v, m, s in zip(views, masks, carved[0])]

@@ -4,7 +4,7 @@
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
-hand masks): the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
+hand masks; the frames of bench_prepare.py): the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from PIL import Image
 
 from windowshop.config import PrepareOptions
 from windowshop.photos.prepare import prepare
+from bench_prepare import beer_photos  # bench/ is on the path when run as a script
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -77,7 +78,7 @@ def skull(work: Path, views: int, options: PrepareOptions) -> dict:
 
 
 def beer(work: Path, views: int, options: PrepareOptions) -> dict:
-    files = spread(sorted((DATA / "beer_can" / "images").glob("*.jpg")), views)
+    files = beer_photos(views)
     report, masks = run(linked(files, work / "beer"), work / "beer-scene", options)
     shares = [float(m.mean()) for m in masks.values()] or [0.0]
     return {**summary(report), "area_share": {"min": round(min(shares), 3),

@@ -24,6 +24,7 @@ CAMERA_SIDE = 0.9  # at least this share of the cameras must lie above a support
 BELOW_WEIGHT = 2.0  # each point seen beneath a hypothesis cancels this many inliers
 MIN_SHARE = 0.1  # a plane needs this share of the points near the object ...
 MIN_INLIERS = 30  # ... and at least this many inliers
+BEYOND = 0.3  # ... of which this share lie beyond the footprint of the points above it
 ABOVE = 3.0  # the object's points stand more than this many tolerances above the plane
 FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
 MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
@@ -106,32 +107,49 @@ def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) 
     on = near[inliers]
     refined = np.linalg.svd(on - on.mean(0))[2][-1]
     refined = refined if refined @ normal > 0 else -refined
-    offset = float(refined @ on.mean(0))
-    share = float(np.mean(np.abs(near @ refined - offset) <= tol))
-    return Plane(normal=refined, offset=offset, tolerance=tol, inlier_share=share)
+    found = Plane(normal=refined, offset=float(refined @ on.mean(0)), tolerance=tol,
+                  inlier_share=float(np.mean(np.abs(near @ refined - refined @ on.mean(0)) <= tol)))
+    return found if _reaches_beyond(found, near) else None
+
+
+def _reaches_beyond(found: Plane, near: np.ndarray) -> bool:
+    """Whether enough of the plane's points lie beyond the footprint of the points above it: a
+    surface the object stands on extends past it, unlike a slice through the object's own
+    curved side."""
+    height = found.height(near)
+    above, on = near[height > ABOVE * found.tolerance], near[np.abs(height) <= found.tolerance]
+    if len(above) < MIN_INLIERS:
+        return True  # nothing stands on it: a bare surface, which isolate() reports
+    above, on = (p - np.outer(p @ found.normal, found.normal) for p in (above, on))  # in-plane
+    centre = above.mean(0)
+    footprint = np.percentile(np.linalg.norm(above - centre, axis=1), 90)
+    return float(np.mean(np.linalg.norm(on - centre, axis=1) > footprint)) >= BEYOND
 
 
 def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolated:
     """Support plane, up and the object's points (see the module docstring) of a capture.
 
-    UserError when no object stands out: nearly every point lies on one surface, or none that
-    most views see stands above it.
+    A plane with nothing standing on it (a wall behind the object) is no support: up then
+    comes from the cameras. UserError when no object stands out: nearly every point lies on one
+    surface, or too few points that most views see sit where the views meet.
     """
     plane = fit_support_plane(points, cameras, seed)
     if plane is not None and plane.inlier_share >= FLAT_SHARE:
         raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
                         f"middle of the photos lie on one flat surface (a wall, a floor or an "
                         f"empty table); {ADVICE}")
-    if plane is None:
-        up = normalize.up_vector(np.stack([c.c2w for c in cameras]))
-        chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
-    else:
-        up = plane.normal
+    if plane is not None:
         chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
+        if len(chosen) < MIN_OBJECT_POINTS:  # nothing stands on it: a wall behind, not a support
+            plane, chosen = None, None
+    if plane is None:
+        chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
     if len(chosen) < MIN_OBJECT_POINTS:
-        where = "stand above the surface the photos show" if plane else "sit where the photos meet"
-        raise UserError(f"no object found: only {len(chosen)} points that most photos see "
-                        f"{where} (at least {MIN_OBJECT_POINTS} are needed); {ADVICE}")
+        raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
+                        f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
+                        f"{ADVICE}")
+    up = plane.normal if plane is not None else normalize.up_vector(
+        np.stack([c.c2w for c in cameras]))
     return Isolated(plane=plane, up=up, index=chosen)
 
 

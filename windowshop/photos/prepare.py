@@ -178,8 +178,10 @@ def find_masks(views: list[segment.View], search: np.ndarray, matting: str
     if matting == "rembg":
         masks, kind = matting_rembg.masks([v.pixels for v in views]), "rembg"
     elif (colour := objectbox.background_colour([v.pixels for v in views])) is not None:
-        masks = [objectbox.foreground_mask(v.pixels, colour, objectbox.box_region(search, v.camera))
+        pairs = [objectbox.foreground_mask(v.pixels, colour, objectbox.box_region(search, v.camera))
                  for v in views]
+        masks = segment.see_through([p[0] for p in pairs], [p[1] for p in pairs],
+                                    [v.camera for v in views], search)
         kind = "colour"
     else:
         masks, kind = segment.segment(views, search), "segmented"

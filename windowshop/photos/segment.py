@@ -28,7 +28,7 @@ MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (su
 CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
 HULL_TOLERANCE = 0.15  # a hull voxel survives this share of views missing it (imperfect masks)
-MIN_SEEDS = 5  # fewer object keypoints in a photo: its box outline seeds it alone
+SEE_THROUGH = 0.5  # a hole is seen through when the views agreeing on it are at least half
 
 
 @dataclass(frozen=True)
@@ -176,14 +176,14 @@ def hull_silhouette(points: np.ndarray, voxel: float, camera: Camera) -> np.ndar
     return full[:shape[0], :shape[1]] > 0
 
 
-def carve(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
-          ) -> tuple[list[np.ndarray], np.ndarray] | None:
+def carve(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray,
+          tolerance: float = HULL_TOLERANCE) -> tuple[list[np.ndarray], np.ndarray] | None:
     """(each camera's view of the visual hull of `masks` (H, W) bool, as (H, W) bool; the hull's
     box (2, 3)), or None when nothing survives. Cameras are in the frame of the box `aabb`
     (2, 3) searched, whose floor is the support plane; the hull stops at the box."""
     centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
     points = hull_points(cameras, [m.astype(np.float32) for m in masks], centre, half,
-                         tolerance=HULL_TOLERANCE)
+                         tolerance=tolerance)
     if points is not None:
         points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
     if points is None or not len(points):
@@ -202,6 +202,19 @@ def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
         return masks, None
     silhouettes, box = carved
     return [m & s for m, s in zip(masks, silhouettes)], box
+
+
+def see_through(silhouettes: list[np.ndarray], raw: list[np.ndarray], cameras: list[Camera],
+                aabb: np.ndarray) -> list[np.ndarray]:
+    """The `silhouettes` (H, W) bool with their holes (pixels not in `raw`) reopened where the
+    other views see through them: a hole stays the object's (a white label, a background-
+    coloured part) unless its ray misses the hull that at least half the raw masks agree on.
+    A label is seen from one side only, so from behind it is covered; a real gap (a handle,
+    a ring) is seen through from most directions."""
+    carved = carve(raw, cameras, aabb, tolerance=SEE_THROUGH)
+    if carved is None:
+        return silhouettes
+    return [s & (r | h) for s, r, h in zip(silhouettes, raw, carved[0])]
 
 
 def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:

@@ -48,8 +48,8 @@ def test_masks_match_the_hand_made_ones(skull):
 
 @pytest.mark.slow
 def test_the_skull_stands_upright_on_the_table(skull):
-    """Up is the table's normal: the table's sparse points around the box lie flat at the box's
-    floor (z spread tiny against their x-y spread), and every camera is above it."""
+    """Up is the table's normal: the table's sparse points around the box lie in a plane at the
+    box's floor, square to +z, and every camera sees it from above."""
     meta = json.loads((skull.out_dir / "transforms.json").read_text())["windowshop"]
     transform, aabb = np.array(meta["transform"]), np.array(meta["aabb"])
     model = pycolmap.Reconstruction(skull.out_dir / "colmap")
@@ -58,7 +58,8 @@ def test_the_skull_stands_upright_on_the_table(skull):
     floor = aabb[0, 2]
     table = points[(np.abs(points[:, 2] - floor) < 0.1) & (np.abs(points[:, :2]).max(1) < 3)]
     assert len(table) > 30
-    assert np.std(table[:, 2]) < 0.1 * np.std(table[:, :2], axis=0).min()
+    normal = np.linalg.svd(table - table.mean(0))[2][-1]
+    assert np.degrees(np.arccos(abs(normal[2]))) < 5.0
     assert np.median(table[:, 2]) == pytest.approx(floor, abs=0.05)
     heights = np.array([f.camera.center[2] for f in read_source(skull.out_dir).frames])
-    assert np.all(heights > floor + 0.1)
+    assert np.all(heights > np.median(table[:, 2]))  # the lowest views graze the table

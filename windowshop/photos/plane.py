@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from windowshop.errors import UserError
 from windowshop.photos.objectbox import MOST_VIEWS, NEAR_TARGET, seen_counts
@@ -19,12 +20,14 @@ from windowshop.scene.cameras import nearest_point_to_axes
 from windowshop.scene.types import Camera
 
 TOLERANCE = 0.01  # inlier distance, as a share of the median camera distance to the object
-TRIALS = 400  # RANSAC hypotheses
+TRIALS = 2000  # RANSAC hypotheses
+NEIGHBOURS = 12  # each is drawn from a point and its nearest neighbours
+MAX_POINTS = 3000  # a random subset of the points near the object scores them (memory, time)
 CAMERA_SIDE = 0.9  # at least this share of the cameras must lie above a support plane
 BELOW_WEIGHT = 2.0  # each point seen beneath a hypothesis cancels this many inliers
 MIN_SHARE = 0.1  # a plane needs this share of the points near the object ...
 MIN_INLIERS = 30  # ... and at least this many inliers
-BEYOND = 0.3  # ... of which this share lie beyond the footprint of the points above it
+BEYOND = 0.15  # ... of which this share lie beyond the footprint of the points above it
 ABOVE = 3.0  # the object's points stand more than this many tolerances above the plane
 FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
 MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
@@ -62,26 +65,38 @@ def capture_scale(cameras: list[Camera]) -> tuple[np.ndarray, float]:
     return target, float(np.median(np.linalg.norm(c2ws[:, :3, 3] - target, axis=-1)))
 
 
-def _score(normal: np.ndarray, offset: float, points: np.ndarray, centres: np.ndarray,
-           tol: float) -> tuple[float, np.ndarray, np.ndarray]:
-    """(score, normal, inliers (N,) bool) of one hypothesis, the normal turned to the cameras."""
-    if np.median(centres @ normal - offset) < 0:
-        normal, offset = -normal, -offset
-    if np.mean(centres @ normal - offset > tol) < CAMERA_SIDE:
-        return -np.inf, normal, np.zeros(len(points), dtype=bool)
-    height = points @ normal - offset
-    inliers = np.abs(height) <= tol
-    return inliers.sum() - BELOW_WEIGHT * np.sum(height < -ABOVE * tol), normal, inliers
+def _hypotheses(near: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (T, 3) unit, offsets (T,)) of planes through three points of `near` (P, 3): a
+    random point and two of its NEIGHBOURS nearest (planes are local: far likelier to draw three
+    of the surface's points than from anywhere); degenerate triples dropped."""
+    k = min(NEIGHBOURS, len(near) - 1)
+    _, neighbours = cKDTree(near).query(near, k + 1)
+    first = rng.integers(len(near), size=TRIALS)
+    pick = neighbours[first[:, None], 1 + rng.integers(k, size=(TRIALS, 2))]
+    a, b, c = near[first], near[pick[:, 0]], near[pick[:, 1]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    keep = length > 1e-12
+    normals = normals[keep] / length[keep, None]
+    return normals, np.sum(normals * a[keep], axis=1)
 
 
-def _through(sample: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """(normal (3,), offset) of the plane through three points (3, 3), None if degenerate."""
-    normal = np.cross(sample[1] - sample[0], sample[2] - sample[0])
-    length = np.linalg.norm(normal)
-    if length < 1e-12:
+def _best(near: np.ndarray, centres: np.ndarray, tol: float, rng: np.random.Generator
+          ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(normal (3,) toward the cameras, inliers (P,) bool) of the best hypothesis: most points
+    on it, BELOW_WEIGHT less for each point seen beneath it, and CAMERA_SIDE of the cameras above
+    it; None if no hypothesis has the cameras on one side."""
+    normals, offsets = _hypotheses(near, rng)
+    flip = np.where(np.median(centres @ normals.T - offsets, axis=0) < 0, -1.0, 1.0)
+    normals, offsets = normals * flip[:, None], offsets * flip
+    heights = near @ normals.T - offsets  # (P, T)
+    score = (np.abs(heights) <= tol).sum(0) - BELOW_WEIGHT * (heights < -ABOVE * tol).sum(0)
+    score = np.where(np.mean(centres @ normals.T - offsets > tol, axis=0) >= CAMERA_SIDE, score,
+                     -np.inf)
+    best = int(np.argmax(score))
+    if not np.isfinite(score[best]):
         return None
-    normal = normal / length
-    return normal, float(normal @ sample[0])
+    return normals[best], np.abs(heights[:, best]) <= tol
 
 
 def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Plane | None:
@@ -89,21 +104,14 @@ def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) 
     points (P, 3) near the cameras' look-at point; None when no plane qualifies."""
     target, distance = capture_scale(cameras)
     near = points[np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance]
-    tol = TOLERANCE * distance
-    centres = np.stack([c.center for c in cameras])
     if len(near) < MIN_INLIERS:
         return None
-    rng = np.random.default_rng(seed)
-    best = (-np.inf, None, None)
-    for _ in range(TRIALS):
-        plane = _through(near[rng.choice(len(near), 3, replace=False)])
-        if plane is not None:
-            score, normal, inliers = _score(*plane, near, centres, tol)
-            if score > best[0]:
-                best = (score, normal, inliers)
-    score, normal, inliers = best
-    if normal is None or inliers.sum() < max(MIN_INLIERS, MIN_SHARE * len(near)):
+    near = near[np.random.default_rng(seed).permutation(len(near))[:MAX_POINTS]]
+    tol = TOLERANCE * distance
+    best = _best(near, np.stack([c.center for c in cameras]), tol, np.random.default_rng(seed))
+    if best is None or best[1].sum() < max(MIN_INLIERS, MIN_SHARE * len(near)):
         return None
+    normal, inliers = best
     on = near[inliers]
     refined = np.linalg.svd(on - on.mean(0))[2][-1]
     refined = refined if refined @ normal > 0 else -refined

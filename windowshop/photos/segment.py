@@ -24,6 +24,7 @@ from windowshop.scene.types import Camera
 
 ITERATIONS = 5  # GrabCut rounds
 WORK_SIDE = 256  # GrabCut runs on the box's part of the photo scaled to at most this many pixels
+COARSE_SIDE = 160  # ... and this many in the first round, which only has to feed the hull
 MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (sure background beyond)
 CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
@@ -91,7 +92,7 @@ def grabcut_mask(view: View, aabb: np.ndarray) -> np.ndarray:
     anything inside the projected box may be the object, nothing outside it is."""
     outline = box_outline(aabb, view.camera)
     seeds = np.where(outline, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8)
-    return _run(view, _seed_points(seeds, view, outline), outline)
+    return _run(view, _seed_points(seeds, view, outline), outline, COARSE_SIDE)
 
 
 def refined_mask(view: View, mask: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
@@ -100,11 +101,13 @@ def refined_mask(view: View, mask: np.ndarray, silhouette: np.ndarray) -> np.nda
     the surface beside it) rather than the far room."""
     seeds = np.where(silhouette, cv2.GC_PR_BGD, cv2.GC_BGD).astype(np.uint8)
     seeds[mask & silhouette] = cv2.GC_PR_FGD
-    return _run(view, _seed_points(seeds, view, mask & silhouette), silhouette) & silhouette
+    return _run(view, _seed_points(seeds, view, mask & silhouette), silhouette,
+                WORK_SIDE) & silhouette
 
 
-def _run(view: View, seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
-    """(H, W) bool: GrabCut from `seeds` on the part of the photo around `region` (H, W) bool."""
+def _run(view: View, seeds: np.ndarray, region: np.ndarray, side: int) -> np.ndarray:
+    """(H, W) bool: GrabCut from `seeds` on the part of the photo around `region` (H, W) bool,
+    scaled to at most `side` pixels."""
     if not region.any():
         return region
     rows, cols = _crop(region, round(CONTEXT * np.hypot(*seeds.shape)))
@@ -112,15 +115,15 @@ def _run(view: View, seeds: np.ndarray, region: np.ndarray) -> np.ndarray:
     if not np.any(crop == cv2.GC_BGD) or not np.any((crop == cv2.GC_FGD) | (crop == cv2.GC_PR_FGD)):
         return region  # GrabCut needs both kinds; the region is the best guess left
     mask = np.zeros(seeds.shape, dtype=bool)
-    mask[rows, cols] = _grabcut(view.pixels[rows, cols], crop)
+    mask[rows, cols] = _grabcut(view.pixels[rows, cols], crop, side)
     return _clean(mask, seeds == cv2.GC_FGD)
 
 
-def _grabcut(pixels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+def _grabcut(pixels: np.ndarray, seeds: np.ndarray, side: int) -> np.ndarray:
     """(h, w) bool foreground of GrabCut on `pixels` (h, w, 3) uint8 RGB from `seeds` (h, w)
-    (cv2.GC_* labels), run at most WORK_SIDE pixels wide (its time grows with the pixels)."""
+    (cv2.GC_* labels), run at most `side` pixels wide (its time grows with the pixels)."""
     h, w = seeds.shape
-    scale = min(1.0, WORK_SIDE / max(h, w))
+    scale = min(1.0, side / max(h, w))
     size = (max(1, round(w * scale)), max(1, round(h * scale)))
     image = cv2.resize(np.ascontiguousarray(pixels[..., ::-1]), size, interpolation=cv2.INTER_AREA)
     labels = cv2.resize(seeds, size, interpolation=cv2.INTER_NEAREST)

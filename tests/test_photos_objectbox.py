@@ -33,7 +33,8 @@ def test_object_box_keeps_the_object_and_drops_the_background():
     floor = np.column_stack([rng.uniform(-8, 8, (300, 2)), np.full(300, -0.5)])
     floor = floor[np.linalg.norm(floor[:, :2], axis=1) > 2.5]  # floor away from the object
     cams = _ring()
-    chosen = objectbox.object_points(np.concatenate([obj, wall, floor]), cams)
+    points = np.concatenate([obj, wall, floor])
+    chosen = points[objectbox.object_index(points, cams)]
     lo, hi = objectbox.object_box(chosen, cams, np.eye(3))
     assert len(chosen) == len(obj)
     assert np.all(lo <= obj.min(0)) and np.all(hi >= obj.max(0))

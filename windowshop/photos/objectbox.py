@@ -40,13 +40,14 @@ def seen_counts(points: np.ndarray, cameras: list[Camera], inner: float = INNER)
     return counts
 
 
-def object_points(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
-    """(Q, 3) the sparse points (P, 3) that are the object's (see the module's docstring)."""
+def object_index(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """(Q,) indices of the sparse points (P, 3) that are the object's (see the module's
+    docstring)."""
     c2ws = np.stack([c.c2w for c in cameras])
     target = nearest_point_to_axes(c2ws)
     reach = NEAR_TARGET * float(np.median(np.linalg.norm(c2ws[:, :3, 3] - target, axis=-1)))
-    near = points[np.linalg.norm(points - target, axis=-1) <= reach]
-    return near[seen_counts(near, cameras) >= MOST_VIEWS * len(cameras)]
+    near = np.flatnonzero(np.linalg.norm(points - target, axis=-1) <= reach)
+    return near[seen_counts(points[near], cameras) >= MOST_VIEWS * len(cameras)]
 
 
 def object_box(chosen: np.ndarray, cameras: list[Camera],

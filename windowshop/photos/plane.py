@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from windowshop.errors import UserError
-from windowshop.photos.objectbox import MOST_VIEWS, NEAR_TARGET, seen_counts
+from windowshop.photos.objectbox import NEAR_TARGET, object_index
 from windowshop.scene import normalize
 from windowshop.scene.cameras import nearest_point_to_axes
 from windowshop.scene.types import Camera
@@ -162,9 +162,7 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolate
 
 
 def _most_seen(points: np.ndarray, cameras: list[Camera], allowed: np.ndarray) -> np.ndarray:
-    """(Q,) indices of the `allowed` (P,) bool `points` (P, 3) near the look-at point that most
-    views see."""
-    target, distance = capture_scale(cameras)
-    near = allowed & (np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance)
-    index = np.flatnonzero(near)
-    return index[seen_counts(points[index], cameras) >= MOST_VIEWS * len(cameras)]
+    """(Q,) indices of the `allowed` (P,) bool `points` (P, 3) that are the object's by
+    objectbox.object_index (near the look-at point, seen by most views)."""
+    index = np.flatnonzero(allowed)
+    return index[object_index(points[index], cameras)]

@@ -2,7 +2,9 @@
 
     input ──gather──> photos (upright, working size; duplicates and blur dropped)
           ──pycolmap──> intrinsics and poses (retried with relaxed settings)
-          ──object──> box from the points most views see, masks on a plain background,
+          ──object──> support plane (up = its normal) and the points above it that most views
+                      see, masks (colour on a plain background, else GrabCut seeded by those
+                      points; both cut to the views' visual hull), the box from that hull,
                       normalised frame (object at the origin, up = +z, box in [-1, 1]^3)
           ──write──> transforms.json, images/, masks/, colmap/, report.json, cameras.png
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from windowshop.errors import UserError
-from windowshop.photos import matting_rembg, segment
+from windowshop.photos import matting_rembg, objectbox, segment
 from windowshop.rays import project
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
@@ -100,3 +100,52 @@ def test_rembg_missing_is_a_user_error(monkeypatch, tmp_path):
     monkeypatch.setenv("U2NET_HOME", str(tmp_path))
     with pytest.raises(UserError, match="rembg"):
         matting_rembg.masks([np.zeros((8, 8, 3), dtype=np.uint8)])
+
+
+def _boxes_image(cam: Camera, boxes: list[np.ndarray], label: bool) -> np.ndarray:
+    """(H, W, 3) uint8: textured boxes (each (2, 3)) on white; with `label`, a white square on
+    the +x face of the first box."""
+    j, i = np.mgrid[0:cam.height, 0:cam.width] + 0.5
+    local = np.stack([(i - cam.cx) / cam.fx, -(j - cam.cy) / cam.fy, -np.ones_like(i)], -1)
+    dirs = local.reshape(-1, 3) @ cam.c2w[:3, :3].T
+    inv = 1.0 / np.where(np.abs(dirs) < 1e-12, 1e-12, dirs)
+    nearest = np.full(len(dirs), np.inf)
+    for box in boxes:  # slab test
+        t0, t1 = (box[0] - cam.center) * inv, (box[1] - cam.center) * inv
+        enter, leave = np.minimum(t0, t1).max(1), np.maximum(t0, t1).min(1)
+        nearest = np.where((enter <= leave) & (enter > 0), np.minimum(nearest, enter), nearest)
+    hit = np.isfinite(nearest)
+    p = cam.center + np.where(hit, nearest, 0)[:, None] * dirs
+    colour = np.where(hit[:, None], np.stack([120 + 60 * np.sin(9 * p[:, 1]),
+                      90 + 60 * np.sin(7 * p[:, 2]), 60 + 40 * np.sin(5 * p[:, 0])], -1), 255)
+    if label:
+        on = hit & (np.abs(p[:, 0] - boxes[0][1, 0]) < 1e-6) & (np.abs(p[:, 1]) < 0.25) \
+            & (np.abs(p[:, 2]) < 0.25)
+        colour[on] = 255
+    return colour.reshape(cam.height, cam.width, 3).astype(np.uint8)
+
+
+@pytest.mark.parametrize("thing", ["frame", "labelled box"])
+def test_holes_stay_the_objects_unless_the_views_see_through(thing):
+    """A picture frame's hole is seen through from most directions: background. A white label
+    on a box is seen from one side only: the box's, though it looks like the background."""
+    cube = np.array([[-0.4, -0.4, -0.4], [0.4, 0.4, 0.4]])
+    bars = [np.array([[-0.1, -0.5, lo], [0.1, 0.5, lo + 0.25]]) for lo in (-0.5, 0.25)] + \
+        [np.array([[-0.1, lo, -0.25], [0.1, lo + 0.25, 0.25]]) for lo in (-0.5, 0.25)]
+    boxes = bars if thing == "frame" else [cube]
+    cameras, silhouettes, raws = [], [], []
+    for a in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+        eye = 4 * np.array([np.cos(a) * np.cos(0.3), np.sin(a) * np.cos(0.3), np.sin(0.3)])
+        cam = Camera(fx=128, fy=128, cx=64, cy=64, width=128, height=128,
+                     c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0])))
+        pixels = _boxes_image(cam, boxes, label=thing != "frame")
+        silhouette, raw = objectbox.foreground_mask(pixels, objectbox.plain_colour(pixels))
+        cameras.append(cam)
+        silhouettes.append(silhouette)
+        raws.append(raw)
+    final = segment.see_through(silhouettes, raws, cameras, np.array([[-0.6] * 3, [0.6] * 3]))
+    u, v = project(np.array([[0.1, 0.0, 0.0], [0.4, 0.0, 0.0]]), cameras[0])[0].astype(int)[
+        0 if thing == "frame" else 1]
+    assert silhouettes[0][v, u] and not raws[0][v, u]  # a hole in the front view either way
+    assert final[0][v, u] == (thing != "frame")
+    assert all(f.sum() >= 0.9 * r.sum() for f, r in zip(final, raws))  # the rest is kept

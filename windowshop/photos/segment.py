@@ -29,7 +29,7 @@ MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (su
 CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
 HULL_TOLERANCE = 0.15  # a hull voxel survives this share of views missing it (imperfect masks)
-SEE_THROUGH = 0.5  # a hole is seen through when the views agreeing on it are at least half
+SEE_THROUGH = 0.8  # a hole is the object's where its ray meets a voxel this share of views see
 
 
 @dataclass(frozen=True)
@@ -179,21 +179,43 @@ def hull_silhouette(points: np.ndarray, voxel: float, camera: Camera) -> np.ndar
     return full[:shape[0], :shape[1]] > 0
 
 
-def carve(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray,
-          tolerance: float = HULL_TOLERANCE) -> tuple[list[np.ndarray], np.ndarray] | None:
-    """(each camera's view of the visual hull of `masks` (H, W) bool, as (H, W) bool; the hull's
-    box (2, 3)), or None when nothing survives. Cameras are in the frame of the box `aabb`
-    (2, 3) searched, whose floor is the support plane; the hull stops at the box."""
+def _hull(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
+          ) -> tuple[np.ndarray, float] | None:
+    """(centres (M, 3) of the visual hull's voxels inside the box `aabb` (2, 3), their side), or
+    None when nothing survives; HULL_TOLERANCE of the views may miss a voxel."""
     centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
     points = hull_points(cameras, [m.astype(np.float32) for m in masks], centre, half,
-                         tolerance=tolerance)
+                         tolerance=HULL_TOLERANCE)
     if points is not None:
         points = points[np.all((points >= aabb[0]) & (points <= aabb[1]), axis=1)]
     if points is None or not len(points):
         return None
-    voxel = 2 * half / GRID
+    return points, 2 * half / GRID
+
+
+def carve(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
+          ) -> tuple[list[np.ndarray], np.ndarray] | None:
+    """(each camera's view of the visual hull of `masks` (H, W) bool, as (H, W) bool; the hull's
+    box (2, 3)), or None when nothing survives. Cameras are in the frame of the box `aabb`
+    (2, 3) searched, whose floor is the support plane; the hull stops at the box."""
+    hull = _hull(masks, cameras, aabb)
+    if hull is None:
+        return None
+    points, voxel = hull
     box = np.stack([np.maximum(points.min(0) - voxel, aabb[0]), points.max(0) + voxel])
     return [hull_silhouette(points, voxel, c) for c in cameras], box
+
+
+def _covered_share(points: np.ndarray, cameras: list[Camera], masks: list[np.ndarray]
+                   ) -> np.ndarray:
+    """(M,) the share of the views whose mask (H, W) bool covers each point (M, 3)."""
+    hits = np.zeros(len(points))
+    for cam, mask in zip(cameras, masks):
+        uv, depth = project(points, cam)
+        ui, vi = np.floor(uv).astype(int).T
+        valid = (depth > 0) & (ui >= 0) & (vi >= 0) & (ui < mask.shape[1]) & (vi < mask.shape[0])
+        hits[valid] += mask[vi[valid], ui[valid]]
+    return hits / len(cameras)
 
 
 def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
@@ -210,14 +232,17 @@ def consistent(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray
 def see_through(silhouettes: list[np.ndarray], raw: list[np.ndarray], cameras: list[Camera],
                 aabb: np.ndarray) -> list[np.ndarray]:
     """The `silhouettes` (H, W) bool with their holes (pixels not in `raw`) reopened where the
-    other views see through them: a hole stays the object's (a white label, a background-
-    coloured part) unless its ray misses the hull that at least half the raw masks agree on.
-    A label is seen from one side only, so from behind it is covered; a real gap (a handle,
-    a ring) is seen through from most directions."""
-    carved = carve(raw, cameras, aabb, tolerance=SEE_THROUGH)
-    if carved is None:
+    views see through them: a hole stays the object's (a white label, a background-coloured
+    part) if its ray crosses a voxel of the silhouettes' hull that at least SEE_THROUGH of the
+    raw masks cover. Only the views facing a label miss the object behind it; a real gap (a
+    handle, a frame) is seen through from many directions, so no voxel in it is that covered."""
+    hull = _hull(silhouettes, cameras, aabb)
+    if hull is None:
         return silhouettes
-    return [s & (r | h) for s, r, h in zip(silhouettes, raw, carved[0])]
+    points, voxel = hull
+    solid = points[_covered_share(points, cameras, raw) >= SEE_THROUGH]
+    return [s & (r | hull_silhouette(solid, voxel, c))
+            for s, r, c in zip(silhouettes, raw, cameras)]
 
 
 def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:

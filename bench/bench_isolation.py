@@ -4,7 +4,8 @@
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
-hand masks; the frames of bench_prepare.py): the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
+hand masks; the frames of bench_prepare.py): the masks' share of the image. Prints JSON;
+`--keep` leaves the scenes there.
 """
 
 from __future__ import annotations

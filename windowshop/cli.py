@@ -147,8 +147,8 @@ def cmd_prepare(args: argparse.Namespace) -> None:
 
     options = PrepareOptions(max_side=args.max_side or None, frames=args.frames,
                              intrinsics=parse_intrinsics(args.intrinsics), matcher=args.matcher,
-                             masks=not args.no_masks, matting=args.matting, overwrite=args.overwrite,
-                             verbose=args.verbose)
+                             masks=not args.no_masks, matting=args.matting,
+                             overwrite=args.overwrite, verbose=args.verbose)
     prepare(args.input, args.out, options)
 
 
@@ -300,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-masks", action="store_true",
                    help="no foreground masks (the model then learns the whole photos)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier prepare in --out")
-    p.add_argument("--matting", choices=["grabcut", "rembg"], default="grabcut", help="masks: built-in GrabCut, or rembg (if installed, weights on disk)")
+    p.add_argument("--matting", choices=["grabcut", "rembg"], default="grabcut", help="mask maker")
     p.set_defaults(func=cmd_prepare)
 
     p = sub.add_parser("video", help="photos, a video or a posed scene -> a 360° turntable MP4",

@@ -25,7 +25,7 @@ from windowshop.scene.types import Camera
 ITERATIONS = 5  # GrabCut rounds
 WORK_SIDE = 256  # GrabCut runs on the box's part of the photo scaled to at most this many pixels
 COARSE_SIDE = 160  # ... and this many in the first round, which only has to feed the hull
-MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (sure background beyond)
+MARGIN = 0.03  # the box's outline grows by this share of the image diagonal (background beyond)
 CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (background colours)
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
 HULL_TOLERANCE = 0.15  # a hull voxel survives this share of views missing it (imperfect masks)

@@ -300,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-masks", action="store_true",
                    help="no foreground masks (the model then learns the whole photos)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier prepare in --out")
-    p.add_argument("--matting", choices=["grabcut", "rembg"], default="grabcut", help="mask maker")
+    p.add_argument("--matting", choices=["grabcut", "rembg"], default="grabcut", help="grabcut, or rembg if installed")
     p.set_defaults(func=cmd_prepare)
 
     p = sub.add_parser("video", help="photos, a video or a posed scene -> a 360° turntable MP4",

@@ -1,10 +1,12 @@
 """Per-photo object masks on any background: GrabCut on colour, seeded by the object's own
 sparse points and its box, then made consistent across views through their visual hull.
 
-    object keypoints ──> sure object       box above the support plane ──> where it may be
-    other keypoints (the surface, the room) ──> sure background, and outside the box too
-    GrabCut per photo ──> masks ──visual hull (forgiving a few bad masks)──> a pixel stays the
-    object's only if its ray crosses the hull the other views carve
+    inside the box above the support plane ──> may be the object; outside it ──> is not
+    object keypoints ──> sure object; other keypoints (the surface, the room) ──> sure background
+    GrabCut per photo ──> visual hull of the masks (forgiving a few bad ones) ──> GrabCut again
+    within each photo's view of the hull (its background model now learns the colours right
+    around the object) ──> cut to the hull of the results (segment.consistent): a pixel stays
+    the object's only if its ray crosses the hull the other views carve
 
 Photos are handled in the normalised frame, where the box's floor is the support plane, so the
 hull (and every mask) stops at the surface the object stands on.

@@ -4,7 +4,8 @@
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
-hand masks; the frames of bench_prepare.py): the masks' share of the image. Prints JSON;
+hand masks; the frames of bench_prepare.py) and fruit (an apple and a banana on a white cloth):
+the masks' share of the image. Prints JSON;
 `--keep` leaves the scenes there.
 """
 
@@ -78,19 +79,28 @@ def skull(work: Path, views: int, options: PrepareOptions) -> dict:
             "worst_iou": min(values), "iou": scores}
 
 
-def beer(work: Path, views: int, options: PrepareOptions) -> dict:
-    files = beer_photos(views)
-    report, masks = run(linked(files, work / "beer"), work / "beer-scene", options)
+def area(name: str, files: list[Path], work: Path, options: PrepareOptions) -> dict:
+    """Prepare `files` (no hand masks): how much of each photo the masks take."""
+    report, masks = run(linked(files, work / name), work / f"{name}-scene", options)
     shares = [float(m.mean()) for m in masks.values()] or [0.0]
     return {**summary(report), "area_share": {"min": round(min(shares), 3),
             "median": round(float(np.median(shares)), 3), "max": round(max(shares), 3)}}
+
+
+def beer(work: Path, views: int, options: PrepareOptions) -> dict:
+    return area("beer", beer_photos(views), work, options)
+
+
+def fruit(work: Path, views: int, options: PrepareOptions) -> dict:
+    files = spread(sorted((DATA / "fruit" / "newfruit_small").glob("*.jpg")), views)
+    return area("fruit", files, work, options)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=16)
     parser.add_argument("--max-side", type=int, default=640)
-    parser.add_argument("--only", choices=["skull", "beer"], default=None)
+    parser.add_argument("--only", choices=["skull", "beer", "fruit"], default=None)
     parser.add_argument("--keep", default=None, help="write the scenes under this folder")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
@@ -98,7 +108,7 @@ def main() -> None:
                "max_side": args.max_side}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(args.keep) if args.keep else Path(tmp)
-        for name, bench in (("dtu_skull", skull), ("beer_can", beer)):
+        for name, bench in (("dtu_skull", skull), ("beer_can", beer), ("fruit", fruit)):
             if args.only in (None, name.split("_")[0]):
                 results[name] = bench(work, args.views, options)
     print(json.dumps(results, indent=2))

@@ -1,12 +1,11 @@
 """Object isolation on real backgrounds: `windowshop prepare`'s masks against hand-made ones.
 
-    python bench/bench_isolation.py [--views 16] [--max-side 640] [--keep DIR]
+    python bench/bench_isolation.py [--views 16] [--max-side 640] [--only skull|beer|fruit] [--keep DIR]
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
 hand masks; the frames of bench_prepare.py) and fruit (an apple and a banana on a white cloth):
-the masks' share of the image. Prints JSON;
-`--keep` leaves the scenes there.
+the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
 """
 
 from __future__ import annotations

@@ -86,3 +86,17 @@ def test_a_landscape_is_no_object():
                        np.array([0.0, 0.0, 1.0]), 0.0) for x in np.linspace(-5, 5, 8)]
     with pytest.raises(UserError, match="no object found"):
         plane.isolate(hill, cameras)
+
+
+def test_a_wall_behind_the_object_is_no_support_for_upright_photos():
+    """Upright photos from in front of a textured wall: the wall is a plane with every camera on
+    one side and the object "above" it, but the photos agree that up runs along it."""
+    rng = np.random.default_rng(4)
+    blob = rng.normal(size=(300, 3))
+    blob = 0.4 * blob / np.linalg.norm(blob, axis=1, keepdims=True)
+    wall = np.column_stack([rng.uniform(-2, 2, 2000), np.full(2000, 1.0), rng.uniform(-2, 2, 2000)])
+    cameras = [_rolled(4 * np.array([np.sin(a), -np.cos(a), 0.3]), np.zeros(3),
+                       np.array([0.0, 0.0, 1.0]), rng.uniform(-10, 10))
+               for a in np.linspace(-0.8, 0.8, 9)]
+    isolated = plane.isolate(np.concatenate([blob, wall]), cameras)
+    assert isolated.plane is None and isolated.up[2] > 0.95

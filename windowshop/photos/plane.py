@@ -30,6 +30,8 @@ MIN_INLIERS = 30  # ... and at least this many inliers
 BEYOND = 0.15  # ... of which this share lie beyond the footprint of the points above it
 ABOVE = 3.0  # the object's points stand more than this many tolerances above the plane
 FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
+UPRIGHT_AGREE = 0.9  # photos whose mean up is this long agree on an up ...
+WALL_ANGLE = 60.0  # ... and a plane further off it (degrees) stands upright: no support
 MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
 ADVICE = ("photograph one object standing on a surface, walking around it and keeping it in "
           "the middle of every photo")
@@ -146,6 +148,8 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolate
         raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
                         f"middle of the photos lie on one flat surface (a wall, a floor or an "
                         f"empty table); {ADVICE}")
+    if plane is not None and _across_upright_photos(plane, cameras):
+        plane = None  # photos that agree on up show a wall or an object's side, not a support
     if plane is not None:
         chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
         if len(chosen) < MIN_OBJECT_POINTS:  # nothing stands on it: a wall behind, not a support
@@ -159,6 +163,17 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolate
     up = plane.normal if plane is not None else normalize.up_vector(
         np.stack([c.c2w for c in cameras]))
     return Isolated(plane=plane, up=up, index=chosen)
+
+
+def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:
+    """Whether the photos agree on an up (their rolls within about 25 degrees of each other, as
+    upright photos) that is more than WALL_ANGLE degrees off the plane's normal. Photos at
+    random rolls agree on nothing, and then the plane alone decides."""
+    mean_up = np.stack([c.c2w[:3, 1] for c in cameras]).mean(0)
+    if np.linalg.norm(mean_up) < UPRIGHT_AGREE:
+        return False
+    cosine = float(found.normal @ mean_up) / np.linalg.norm(mean_up)
+    return cosine < np.cos(np.radians(WALL_ANGLE))
 
 
 def _most_seen(points: np.ndarray, cameras: list[Camera], allowed: np.ndarray) -> np.ndarray:

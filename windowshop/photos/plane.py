@@ -2,8 +2,10 @@
 object, "up" as its normal, and the object's points as those standing above it.
 
 A support plane is opaque: the cameras are all on one side of it and no point is ever seen
-beneath it. That, not the photos' roll, tells a table from a plane through the object itself,
-so "up" holds for photos taken at any roll. Without such a plane, up falls back to the cameras.
+beneath it; it reaches beyond the object's footprint; something stands on it. That, not the
+photos' roll, tells a table from a plane through the object itself, so "up" holds for photos
+taken at any roll. Only photos that agree on an up (upright ones) can overrule it: a plane far
+off their up is a wall. Without a support plane, up falls back to the cameras.
 """
 
 from __future__ import annotations

@@ -107,8 +107,9 @@ def main() -> None:
                "max_side": args.max_side}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(args.keep) if args.keep else Path(tmp)
-        for name, bench in (("dtu_skull", skull), ("beer_can", beer), ("fruit", fruit)):
-            if args.only in (None, name.split("_")[0]):
+        for key, name, bench in (("skull", "dtu_skull", skull), ("beer", "beer_can", beer),
+                                 ("fruit", "fruit", fruit)):
+            if args.only in (None, key):
                 results[name] = bench(work, args.views, options)
     print(json.dumps(results, indent=2))
 

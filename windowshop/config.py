@@ -98,7 +98,8 @@ class PrepareOptions:
     video_frames: int = 40  # frames sampled from a video
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
     matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
-    masks: bool = True  # foreground masks (by colour on a plain background, else feature hulls)
+    masks: bool = True  # foreground masks (by colour on a plain background, else segmented)
+    matting: str = "grabcut"  # "grabcut" (built in) or "rembg" (needs rembg and its weights)
     overwrite: bool = False  # replace an earlier prepare's output folder
     seed: int = 0  # random seed of structure from motion
     verbose: bool = False  # pycolmap's own logging

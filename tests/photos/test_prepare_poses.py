@@ -65,10 +65,10 @@ def test_beer_can_20_photos_agree_with_its_colmap_model(beer):
 
 
 def test_beer_can_masks_outline_its_features(beer):
-    """The tiled floor is no plain background: each mask is the hull of the object's keypoints in
-    that photo, so most of the object's sparse points (seen there or not) project into it, and
-    it is much smaller than the photo."""
-    assert beer.report["masks"] == "hull" and beer.report["background"] == "alpha"
+    """The tiled floor is no plain background: each mask is the can segmented by colour, seeded
+    by its keypoints, so most of the object's sparse points (seen there or not) project into
+    it, and it is much smaller than the photo."""
+    assert beer.report["masks"] == "segmented" and beer.report["background"] == "alpha"
     meta = json.loads((beer.out_dir / "transforms.json").read_text())["windowshop"]
     transform, aabb = np.array(meta["transform"]), np.array(meta["aabb"])
     model = pycolmap.Reconstruction(beer.out_dir / "colmap")

@@ -9,9 +9,8 @@ point the cameras look at, are the object's (and the surface it stands on, right
 from __future__ import annotations
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image
 from scipy import ndimage
-from scipy.spatial import ConvexHull
 
 from windowshop.rays import project
 from windowshop.scene import normalize
@@ -26,9 +25,6 @@ BORDER = 0.04  # share of the image side that forms the border band sampled for 
 PLAIN_SPREAD = 40  # border pixels within this (0-255, max over channels) of its median ...
 PLAIN_SHARE = 0.9  # ... for at least this share of the band: a plain background
 PLAIN_VIEWS = 0.8  # masks are made when at least this share of the views has one
-HOLE_SHARE = 0.002  # holes in the mask smaller than this share of the image are filled
-HULL_POINTS = 20  # fewer object keypoints than this in some photo: no hull masks for the capture
-HULL_GROW = 0.02  # hull masks grow by this share of the image diagonal (features sit inside edges)
 FOREGROUND = 60  # pixels further than this from the background colour are the object's
 
 
@@ -44,13 +40,14 @@ def seen_counts(points: np.ndarray, cameras: list[Camera], inner: float = INNER)
     return counts
 
 
-def object_points(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
-    """(Q, 3) the sparse points (P, 3) that are the object's (see the module's docstring)."""
+def object_index(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """(Q,) indices of the sparse points (P, 3) that are the object's (see the module's
+    docstring)."""
     c2ws = np.stack([c.c2w for c in cameras])
     target = nearest_point_to_axes(c2ws)
     reach = NEAR_TARGET * float(np.median(np.linalg.norm(c2ws[:, :3, 3] - target, axis=-1)))
-    near = points[np.linalg.norm(points - target, axis=-1) <= reach]
-    return near[seen_counts(near, cameras) >= MOST_VIEWS * len(cameras)]
+    near = np.flatnonzero(np.linalg.norm(points - target, axis=-1) <= reach)
+    return near[seen_counts(points[near], cameras) >= MOST_VIEWS * len(cameras)]
 
 
 def object_box(chosen: np.ndarray, cameras: list[Camera],
@@ -96,11 +93,14 @@ def box_region(aabb: np.ndarray, camera: Camera, margin: float = 0.05) -> np.nda
 
 
 def foreground_mask(pixels: np.ndarray, colour: np.ndarray, region: np.ndarray | None = None
-                    ) -> np.ndarray:
-    """(H, W) bool: the object on a plain background of `colour` (3,), in `pixels` (H, W, 3).
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(silhouette, raw), both (H, W) bool: the object on a plain background of `colour` (3,),
+    in `pixels` (H, W, 3).
 
-    Pixels far from the background colour (inside `region`, if given), cleaned of specks, kept
-    as the large connected parts, small holes filled and grown by a pixel so edges stay on it.
+    raw: pixels far from the background colour (inside `region`, if given), cleaned of specks,
+    kept as the large connected parts, grown by a pixel so edges stay on it. silhouette: raw
+    with every hole filled, for an object's own white or background-coloured parts look just
+    like the background; only other views can tell a hole seen through (segment.see_through).
     """
     mask = np.abs(pixels.astype(np.float32) - colour).max(-1) > FOREGROUND
     if region is not None:
@@ -110,11 +110,8 @@ def foreground_mask(pixels: np.ndarray, colour: np.ndarray, region: np.ndarray |
     if count:
         sizes = ndimage.sum(mask, labels, index=np.arange(1, count + 1))
         mask = np.isin(labels, 1 + np.flatnonzero(sizes >= 0.05 * sizes.max()))
-    holes, count = ndimage.label(ndimage.binary_fill_holes(mask) & ~mask)
-    if count:  # small holes are dark or shiny parts of the object; large ones show the background
-        sizes = ndimage.sum(holes > 0, holes, index=np.arange(1, count + 1))
-        mask |= np.isin(holes, 1 + np.flatnonzero(sizes < HOLE_SHARE * mask.size))
-    return ndimage.binary_dilation(mask, iterations=1)
+    raw = ndimage.binary_dilation(mask, iterations=1)
+    return ndimage.binary_fill_holes(raw), raw
 
 
 def background_colour(images: list[np.ndarray]) -> np.ndarray | None:
@@ -123,20 +120,6 @@ def background_colour(images: list[np.ndarray]) -> np.ndarray | None:
     if len(colours) < PLAIN_VIEWS * len(images):
         return None
     return np.median(np.stack(colours), axis=0)
-
-
-def hull_mask(points: np.ndarray, width: int, height: int, grow: float = HULL_GROW) -> np.ndarray:
-    """(H, W) bool: the convex hull of the object's keypoints `points` (K, 2) in one photo, grown
-    by `grow` of the image diagonal. For a busy background, where colour cannot tell the object
-    apart, this is the silhouette the object's own features outline (convex objects: tightly)."""
-    hull = points[ConvexHull(points).vertices]
-    centre = hull.mean(0)
-    offset = hull - centre
-    hull = centre + offset * (1 + grow * np.hypot(width, height) / np.linalg.norm(offset, axis=1,
-                                                                                   keepdims=True))
-    image = Image.new("L", (width, height), 0)
-    ImageDraw.Draw(image).polygon([tuple(v) for v in hull], fill=255)
-    return np.asarray(image) > 0
 
 
 def mask_image(mask: np.ndarray) -> Image.Image:

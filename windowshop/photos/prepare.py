@@ -2,7 +2,9 @@
 
     input ──gather──> photos (upright, working size; duplicates and blur dropped)
           ──pycolmap──> intrinsics and poses (retried with relaxed settings)
-          ──object──> box from the points most views see, masks on a plain background,
+          ──object──> support plane (up = its normal) and the points above it that most views
+                      see, masks (colour on a plain background, else GrabCut seeded by those
+                      points; both cut to the views' visual hull), the box from that hull,
                       normalised frame (object at the origin, up = +z, box in [-1, 1]^3)
           ──write──> transforms.json, images/, masks/, colmap/, report.json, cameras.png
 
@@ -24,15 +26,16 @@ import numpy as np
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
-from windowshop.photos import objectbox, output, report
+from windowshop.photos import matting_rembg, objectbox, output, plane, report, segment
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
-from windowshop.scene.cameras import up_vector
 from windowshop.scene.nerfstudio import WRITER_KEY
 
+SEARCH_GROW = 0.3  # masks are sought in the points' box grown by this share of its size ...
+BACKGROUND_GROW = 0.2  # ... and sparse points this share of the box size outside that are not it
 MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
 # Share of the "prepare" progress each stage covers (retries add time but no progress).
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
@@ -57,8 +60,9 @@ class Located:
     aabb: np.ndarray  # (2, 3) normalised
     points: np.ndarray  # (Q, 3) the object's sparse points, normalised
     masks: dict[str, np.ndarray]  # photo name -> (H, W) bool; empty when none are made
-    mask_kind: str  # "colour" (plain background), "hull" (object keypoints) or "none"
+    mask_kind: str  # "segmented" (GrabCut), "colour" (plain background), "rembg" or "none"
     background: str
+    plane: plane.Plane | None  # the support plane, COLMAP frame
 
 
 def check_out_dir(source: Path, out_dir: Path, overwrite: bool) -> None:
@@ -138,55 +142,92 @@ def _shown(photo: Photo) -> str:
     return photo.name if photo.source.suffix.lower() in VIDEO_SUFFIXES else photo.source.name
 
 
-def _object_keypoints(sfm: SfmResult, photo: output.PosedPhoto, transform: np.ndarray,
-                      aabb: np.ndarray) -> np.ndarray:
-    """(K, 2) pixels of `photo` whose sparse point lies in the object box (normalised frame)."""
-    image = sfm.reconstruction.find_image_with_name(photo.image_name)
-    seen = [p for p in image.points2D if p.has_point3D()]
-    if not seen:
-        return np.zeros((0, 2))
-    xyz = np.array([sfm.reconstruction.points3D[p.point3D_id].xyz for p in seen])
-    xyz = xyz @ transform[:3, :3].T + transform[:3, 3]
-    inside = np.all((xyz >= aabb[0]) & (xyz <= aabb[1]), axis=1)
-    return np.array([p.xy for p in seen])[inside].reshape(-1, 2)
+def _views(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str, np.ndarray],
+           labels: dict[int, int]) -> list[segment.View]:
+    """Each photo with the pixels of the sparse points it observes, by `labels` (point id ->
+    1 for the object's, 0 for the background's; others are left out)."""
+    views = []
+    for p in photos:
+        image = sfm.reconstruction.find_image_with_name(p.image_name)
+        seen = [(labels.get(q.point3D_id, -1), q.xy) for q in image.points2D if q.has_point3D()]
+        uv = {k: np.array([xy for label, xy in seen if label == k]).reshape(-1, 2) for k in (0, 1)}
+        views.append(segment.View(p.name, pixels[p.image_name], p.camera, uv[1], uv[0]))
+    return views
 
 
-def find_masks(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str, np.ndarray],
-               transform: np.ndarray, aabb: np.ndarray) -> tuple[dict[str, np.ndarray], str]:
-    """(photo name -> (H, W) bool mask, how they were made: "colour", "hull" or "none").
+def _labels(points: np.ndarray, ids: np.ndarray, isolated: plane.Isolated,
+            transform: np.ndarray, aabb: np.ndarray) -> dict[int, int]:
+    """Point id -> 1 for the object's points, 0 for points surely off it: on the support plane,
+    or well outside the object box (normalised `aabb`); points (P, 3) in the COLMAP frame."""
+    moved = points @ transform[:3, :3].T + transform[:3, 3]
+    grow = BACKGROUND_GROW * (aabb[1] - aabb[0])
+    off = np.any((moved < aabb[0] - grow) | (moved > aabb[1] + grow), axis=1)
+    if isolated.plane is not None:
+        off |= np.abs(isolated.plane.height(points)) <= isolated.plane.tolerance
+    labels = {int(i): 0 for i in ids[off]}
+    labels.update({int(i): 1 for i in ids[isolated.index]})
+    return labels
 
-    A plain background gives colour masks; otherwise, when every photo has enough of the
-    object's keypoints, their convex hulls; otherwise none.
+
+def find_masks(views: list[segment.View], search: np.ndarray, matting: str
+               ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None]:
+    """(photo name -> (H, W) bool mask, how they were made: "rembg", "colour" or "segmented",
+    the object's box (2, 3) from the masks' visual hull, or None) for an object in `search`.
+
+    A learned matting backend when asked for; else colour on a plain background; else GrabCut
+    seeded by the object's points. All are made consistent across views (segment.consistent).
     """
-    colour = objectbox.background_colour([pixels[p.image_name] for p in photos])
-    if colour is not None:
-        masks = {}
-        for p in photos:
-            region = objectbox.box_region(aabb, p.camera)
-            masks[p.name] = objectbox.foreground_mask(pixels[p.image_name], colour, region)
-        return masks, "colour"
-    keypoints = {p.name: _object_keypoints(sfm, p, transform, aabb) for p in photos}
-    if min(len(k) for k in keypoints.values()) < objectbox.HULL_POINTS:
-        return {}, "none"
-    return {p.name: objectbox.hull_mask(keypoints[p.name], p.camera.width, p.camera.height)
-            for p in photos}, "hull"
+    if matting == "rembg":
+        masks, kind = matting_rembg.masks([v.pixels for v in views]), "rembg"
+    elif (colour := objectbox.background_colour([v.pixels for v in views])) is not None:
+        pairs = [objectbox.foreground_mask(v.pixels, colour, objectbox.box_region(search, v.camera))
+                 for v in views]
+        masks = segment.see_through([p[0] for p in pairs], [p[1] for p in pairs],
+                                    [v.camera for v in views], search)
+        kind = "colour"
+    else:
+        masks, kind = segment.segment(views, search), "segmented"
+    final, box = segment.consistent(masks, [v.camera for v in views], search)
+    return {v.name: m for v, m in zip(views, final)}, kind, box
 
 
-def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], masks: bool) -> Located:
-    """Object box, normalisation and masks for a reconstruction; `pixels` by image file name."""
+def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
+    """(2, 3) `aabb` grown by SEARCH_GROW of its size on each side (featureless parts of the
+    object have no points), except a floor on the support plane."""
+    grow = SEARCH_GROW * (aabb[1] - aabb[0])
+    search = np.stack([aabb[0] - grow, aabb[1] + grow])
+    if floor:
+        search[0, 2] = aabb[0, 2]
+    return search
+
+
+def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions) -> Located:
+    """Support plane, up, object box, normalisation and masks for a reconstruction; `pixels` by
+    image file name. UserError when no object stands out (plane.isolate)."""
     posed = output.posed_photos(sfm.reconstruction)
     cameras = [p.camera for p in posed]
-    rotation = normalize.rotation_to_z(up_vector(np.stack([c.c2w for c in cameras])))
-    points = np.array([p.xyz for p in sfm.reconstruction.points3D.values()]).reshape(-1, 3)
-    chosen = objectbox.object_points(points, cameras)
-    lo, hi = objectbox.object_box(chosen, cameras, rotation)
+    ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
+    points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
+    isolated = plane.isolate(points, cameras, options.seed)
+    rotation = normalize.rotation_to_z(isolated.up)
+    lo, hi = objectbox.object_box(points[isolated.index], cameras, rotation)
+    if isolated.plane is not None:  # the object stands on the plane: the box's floor
+        lo[2] = isolated.plane.offset + isolated.plane.tolerance
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
-    found, kind = find_masks(sfm, posed, pixels, transform, aabb) if masks else ({}, "none")
+    found, kind = {}, "none"
+    if options.masks:
+        search = _search_box(aabb, floor=isolated.plane is not None)
+        views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
+        found, kind, box = find_masks(views, search, options.matting)
+        if box is not None:  # the masks' hull bounds the object better than its points
+            refit, aabb = normalize.similarity(np.eye(3), *box)
+            posed, transform = output.normalised(posed, refit), refit @ transform
+    chosen = points[isolated.index] @ transform[:3, :3].T + transform[:3, 3]
     # with masks the model learns the object alone, over random backgrounds (Scene "alpha")
-    return Located(photos=posed, transform=transform, aabb=aabb,
-                   points=chosen @ transform[:3, :3].T + transform[:3, 3], masks=found,
-                   mask_kind=kind, background="alpha" if found else "white")
+    return Located(photos=posed, transform=transform, aabb=aabb, points=chosen, masks=found,
+                   mask_kind=kind, background="alpha" if found else "white",
+                   plane=isolated.plane)
 
 
 def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,
@@ -221,6 +262,8 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
         "attempts": [vars(a) for a in sfm.attempts], "masks": found.mask_kind,
+        "plane": {"found": found.plane is not None, "inlier_share": None if found.plane is None
+                  else round(found.plane.inlier_share, 3)},
         "background": found.background, "aabb": found.aabb.tolist(),
         "views": [{"name": p.name, "photo": str(by_name[p.name].source)} for p in found.photos],
         "seconds": {k: round(v, 3) for k, v in stages.seconds.items()},
@@ -249,7 +292,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         sfm = reconstruct(image_dir, names, work, _settings(inputs, photos, options), stages)
         check_placed(sfm, len(photos), {f"{p.name}.jpg": _shown(p) for p in photos})
         with stages.stage("finding the object"):
-            found = locate(sfm, {f"{p.name}.jpg": p.pixels for p in photos}, options.masks)
+            found = locate(sfm, {f"{p.name}.jpg": p.pixels for p in photos}, options)
         with stages.stage("writing the scene", len(found.photos)) as advance:
             transforms = _write(out_dir, image_dir, sfm, found, source, advance)
         summary = _report(source, inputs, photos, dropped, sfm, found, stages)

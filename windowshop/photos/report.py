@@ -27,7 +27,8 @@ def summary_lines(report: dict) -> list[str]:
     if report["unplaced"]:
         lines.append(f"  could not place: {', '.join(report['unplaced'])}")
     if report["masks"] != "none":
-        how = {"colour": "the plain background", "hull": "the outline of the object's features"}
+        how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "
+               "points above the surface it stands on", "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
     return lines
 

@@ -1,0 +1,118 @@
+"""Object isolation on real backgrounds: `windowshop prepare`'s masks against hand-made ones.
+
+    python bench/bench_isolation.py [--views 16] [--max-side 640] [--only skull|beer|fruit] [--keep DIR]
+
+dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
+mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
+hand masks; the frames of bench_prepare.py) and fruit (an apple and a banana on a white cloth):
+the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from windowshop.config import PrepareOptions
+from windowshop.photos.prepare import prepare
+from bench_prepare import beer_photos  # bench/ is on the path when run as a script
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def spread(files: list[Path], count: int) -> list[Path]:
+    """`count` of `files`, evenly spread."""
+    picks = np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)
+    return [files[i] for i in picks]
+
+
+def linked(files: list[Path], folder: Path) -> Path:
+    """A folder of symbolic links to `files` (prepare only reads them)."""
+    folder.mkdir(parents=True)
+    for f in files:
+        (folder / f.name).symlink_to(f)
+    return folder
+
+
+def iou(mask: np.ndarray, truth: np.ndarray) -> float:
+    return float((mask & truth).sum() / max((mask | truth).sum(), 1))
+
+
+def run(photos: Path, out: Path, options: PrepareOptions) -> tuple[dict, dict[Path, np.ndarray]]:
+    """(report, source photo -> written mask (H, W) bool) of one prepare."""
+    start = time.perf_counter()
+    report = prepare(photos, out, options, show=False).report
+    report["total_seconds"] = round(time.perf_counter() - start, 2)
+    masks = {}
+    for view in report["views"]:
+        path = out / "masks" / f"{view['name']}.png"
+        if path.is_file():
+            masks[Path(view["photo"])] = np.asarray(Image.open(path).convert("L")) > 127
+    return report, masks
+
+
+def summary(report: dict) -> dict:
+    return {"placed": report["placed"], "masks": report["masks"], "plane": report["plane"],
+            "seconds": report["total_seconds"], "stages": report["seconds"]}
+
+
+def skull(work: Path, views: int, options: PrepareOptions) -> dict:
+    files = spread(sorted((DATA / "dtu_skull" / "images").glob("*.jpg")), views)
+    report, masks = run(linked(files, work / "skull"), work / "skull-scene", options)
+    scores = {}
+    for photo, mask in masks.items():
+        truth = np.asarray(Image.open(DATA / "dtu_skull" / "masks" / f"{photo.stem}.png")
+                           .convert("L")) > 127
+        resized = Image.fromarray(mask).resize(truth.shape[::-1], Image.NEAREST)
+        scores[photo.stem] = round(iou(np.asarray(resized), truth), 3)
+    values = list(scores.values()) or [0.0]
+    return {**summary(report), "mean_iou": round(float(np.mean(values)), 3),
+            "worst_iou": min(values), "iou": scores}
+
+
+def area(name: str, files: list[Path], work: Path, options: PrepareOptions) -> dict:
+    """Prepare `files` (no hand masks): how much of each photo the masks take."""
+    report, masks = run(linked(files, work / name), work / f"{name}-scene", options)
+    shares = [float(m.mean()) for m in masks.values()] or [0.0]
+    return {**summary(report), "area_share": {"min": round(min(shares), 3),
+            "median": round(float(np.median(shares)), 3), "max": round(max(shares), 3)}}
+
+
+def beer(work: Path, views: int, options: PrepareOptions) -> dict:
+    return area("beer", beer_photos(views), work, options)
+
+
+def fruit(work: Path, views: int, options: PrepareOptions) -> dict:
+    files = spread(sorted((DATA / "fruit" / "newfruit_small").glob("*.jpg")), views)
+    return area("fruit", files, work, options)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--views", type=int, default=16)
+    parser.add_argument("--max-side", type=int, default=640)
+    parser.add_argument("--only", choices=["skull", "beer", "fruit"], default=None)
+    parser.add_argument("--keep", default=None, help="write the scenes under this folder")
+    args = parser.parse_args()
+    options = PrepareOptions(max_side=args.max_side)
+    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "views": args.views,
+               "max_side": args.max_side}
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(args.keep) if args.keep else Path(tmp)
+        for key, name, bench in (("skull", "dtu_skull", skull), ("beer", "beer_can", beer),
+                                 ("fruit", "fruit", fruit)):
+            if args.only in (None, key):
+                results[name] = bench(work, args.views, options)
+    print(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

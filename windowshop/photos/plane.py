@@ -1,0 +1,183 @@
+"""The surface the object stands on: a plane fitted by RANSAC to the sparse points around the
+object, "up" as its normal, and the object's points as those standing above it.
+
+A support plane is opaque: the cameras are all on one side of it and no point is ever seen
+beneath it; it reaches beyond the object's footprint; something stands on it. That, not the
+photos' roll, tells a table from a plane through the object itself, so "up" holds for photos
+taken at any roll. Only photos that agree on an up (upright ones) can overrule it: a plane far
+off their up is a wall. Without a support plane, up falls back to the cameras.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from windowshop.errors import UserError
+from windowshop.photos.objectbox import NEAR_TARGET, object_index
+from windowshop.scene.cameras import nearest_point_to_axes, up_vector
+from windowshop.scene.types import Camera
+
+TOLERANCE = 0.01  # inlier distance, as a share of the median camera distance to the object
+TRIALS = 2000  # RANSAC hypotheses
+NEIGHBOURS = 12  # each is drawn from a point and its nearest neighbours
+MAX_POINTS = 3000  # a random subset of the points near the object scores them (memory, time)
+CAMERA_SIDE = 0.9  # at least this share of the cameras must lie above a support plane
+BELOW_WEIGHT = 2.0  # each point seen beneath a hypothesis cancels this many inliers
+MIN_SHARE = 0.1  # a plane needs this share of the points near the object ...
+MIN_INLIERS = 30  # ... and at least this many inliers
+BEYOND = 0.15  # ... of which this share lie beyond the footprint of the points above it
+ABOVE = 3.0  # the object's points stand more than this many tolerances above the plane
+FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
+UPRIGHT_AGREE = 0.9  # photos whose mean up is this long agree on an up ...
+WALL_ANGLE = 60.0  # ... and a plane further off it (degrees) stands upright: no support
+MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
+ADVICE = ("photograph one object standing on a surface, walking around it and keeping it in "
+          "the middle of every photo")
+
+
+@dataclass(frozen=True)
+class Plane:
+    """n . x = offset; `normal` (3,) unit, pointing to the cameras' side."""
+
+    normal: np.ndarray
+    offset: float
+    tolerance: float  # inlier distance, world units
+    inlier_share: float  # share of the points near the object that lie on it
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        """(N,) signed distance of `points` (N, 3) above the plane."""
+        return points @ self.normal - self.offset
+
+
+@dataclass(frozen=True)
+class Isolated:
+    """The support plane (None if none was found), up, and the object's sparse points."""
+
+    plane: Plane | None
+    up: np.ndarray  # (3,) unit
+    index: np.ndarray  # (Q,) int: which of the points given are the object's
+
+
+def capture_scale(cameras: list[Camera]) -> tuple[np.ndarray, float]:
+    """(the point the cameras look at (3,), their median distance to it)."""
+    c2ws = np.stack([c.c2w for c in cameras])
+    target = nearest_point_to_axes(c2ws)
+    return target, float(np.median(np.linalg.norm(c2ws[:, :3, 3] - target, axis=-1)))
+
+
+def _hypotheses(near: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (T, 3) unit, offsets (T,)) of planes through three points of `near` (P, 3): a
+    random point and two of its NEIGHBOURS nearest (planes are local: far likelier to draw three
+    of the surface's points than from anywhere); degenerate triples dropped."""
+    k = min(NEIGHBOURS, len(near) - 1)
+    _, neighbours = cKDTree(near).query(near, k + 1)
+    first = rng.integers(len(near), size=TRIALS)
+    pick = neighbours[first[:, None], 1 + rng.integers(k, size=(TRIALS, 2))]
+    a, b, c = near[first], near[pick[:, 0]], near[pick[:, 1]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    keep = length > 1e-12
+    normals = normals[keep] / length[keep, None]
+    return normals, np.sum(normals * a[keep], axis=1)
+
+
+def _best(near: np.ndarray, centres: np.ndarray, tol: float, rng: np.random.Generator
+          ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(normal (3,) toward the cameras, inliers (P,) bool) of the best hypothesis: most points
+    on it, BELOW_WEIGHT less for each point seen beneath it, and CAMERA_SIDE of the cameras above
+    it; None if no hypothesis has the cameras on one side."""
+    normals, offsets = _hypotheses(near, rng)
+    flip = np.where(np.median(centres @ normals.T - offsets, axis=0) < 0, -1.0, 1.0)
+    normals, offsets = normals * flip[:, None], offsets * flip
+    heights = near @ normals.T - offsets  # (P, T)
+    score = (np.abs(heights) <= tol).sum(0) - BELOW_WEIGHT * (heights < -ABOVE * tol).sum(0)
+    score = np.where(np.mean(centres @ normals.T - offsets > tol, axis=0) >= CAMERA_SIDE, score,
+                     -np.inf)
+    best = int(np.argmax(score))
+    if not np.isfinite(score[best]):
+        return None
+    return normals[best], np.abs(heights[:, best]) <= tol
+
+
+def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Plane | None:
+    """The plane (RANSAC, then least squares on its inliers) the object stands on, among the
+    points (P, 3) near the cameras' look-at point; None when no plane qualifies."""
+    target, distance = capture_scale(cameras)
+    near = points[np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance]
+    if len(near) < MIN_INLIERS:
+        return None
+    near = near[np.random.default_rng(seed).permutation(len(near))[:MAX_POINTS]]
+    tol = TOLERANCE * distance
+    best = _best(near, np.stack([c.center for c in cameras]), tol, np.random.default_rng(seed))
+    if best is None or best[1].sum() < max(MIN_INLIERS, MIN_SHARE * len(near)):
+        return None
+    normal, inliers = best
+    on = near[inliers]
+    refined = np.linalg.svd(on - on.mean(0))[2][-1]
+    refined = refined if refined @ normal > 0 else -refined
+    found = Plane(normal=refined, offset=float(refined @ on.mean(0)), tolerance=tol,
+                  inlier_share=float(np.mean(np.abs(near @ refined - refined @ on.mean(0)) <= tol)))
+    return found if _reaches_beyond(found, near) else None
+
+
+def _reaches_beyond(found: Plane, near: np.ndarray) -> bool:
+    """Whether enough of the plane's points lie beyond the footprint of the points above it: a
+    surface the object stands on extends past it, unlike a slice through the object's own
+    curved side."""
+    height = found.height(near)
+    above, on = near[height > ABOVE * found.tolerance], near[np.abs(height) <= found.tolerance]
+    if len(above) < MIN_INLIERS:
+        return True  # nothing stands on it: a bare surface, which isolate() reports
+    above, on = (p - np.outer(p @ found.normal, found.normal) for p in (above, on))  # in-plane
+    centre = above.mean(0)
+    footprint = np.percentile(np.linalg.norm(above - centre, axis=1), 90)
+    return float(np.mean(np.linalg.norm(on - centre, axis=1) > footprint)) >= BEYOND
+
+
+def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolated:
+    """Support plane, up and the object's points (see the module docstring) of a capture.
+
+    A plane with nothing standing on it (a wall behind the object) is no support: up then
+    comes from the cameras. UserError when no object stands out: nearly every point lies on one
+    surface, or too few points that most views see sit where the views meet.
+    """
+    plane = fit_support_plane(points, cameras, seed)
+    if plane is not None and plane.inlier_share >= FLAT_SHARE:
+        raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
+                        f"middle of the photos lie on one flat surface (a wall, a floor or an "
+                        f"empty table); {ADVICE}")
+    if plane is not None and _across_upright_photos(plane, cameras):
+        plane = None  # photos that agree on up show a wall or an object's side, not a support
+    if plane is not None:
+        chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
+        if len(chosen) < MIN_OBJECT_POINTS:  # nothing stands on it: a wall behind, not a support
+            plane, chosen = None, None
+    if plane is None:
+        chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
+    if len(chosen) < MIN_OBJECT_POINTS:
+        raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
+                        f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
+                        f"{ADVICE}")
+    up = plane.normal if plane is not None else up_vector(np.stack([c.c2w for c in cameras]))
+    return Isolated(plane=plane, up=up, index=chosen)
+
+
+def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:
+    """Whether the photos agree on an up (their rolls within about 25 degrees of each other, as
+    upright photos) that is more than WALL_ANGLE degrees off the plane's normal. Photos at
+    random rolls agree on nothing, and then the plane alone decides."""
+    mean_up = np.stack([c.c2w[:3, 1] for c in cameras]).mean(0)
+    if np.linalg.norm(mean_up) < UPRIGHT_AGREE:
+        return False
+    cosine = float(found.normal @ mean_up) / np.linalg.norm(mean_up)
+    return cosine < np.cos(np.radians(WALL_ANGLE))
+
+
+def _most_seen(points: np.ndarray, cameras: list[Camera], allowed: np.ndarray) -> np.ndarray:
+    """(Q,) indices of the `allowed` (P,) bool `points` (P, 3) that are the object's by
+    objectbox.object_index (near the look-at point, seen by most views)."""
+    index = np.flatnonzero(allowed)
+    return index[object_index(points[index], cameras)]

@@ -7,9 +7,9 @@ import pytest
 
 from windowshop.errors import UserError
 from windowshop.photos import plane
-
 from windowshop.scene.cameras import look_at, up_vector
 from windowshop.scene.types import Camera
+
 
 def _rotation(axis: np.ndarray, degrees: float) -> np.ndarray:
     """(3, 3) rotation by `degrees` about the unit `axis`."""
@@ -17,11 +17,13 @@ def _rotation(axis: np.ndarray, degrees: float) -> np.ndarray:
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
 
+
 def _rolled(eye: np.ndarray, target: np.ndarray, up: np.ndarray, roll: float) -> Camera:
     """A 64 px camera at `eye` looking at `target`, turned `roll` degrees about its view axis."""
     c2w = look_at(eye, target, up)
     c2w[:3, :3] = c2w[:3, :3] @ _rotation(np.array([0.0, 0.0, 1.0]), roll)
     return Camera(fx=64, fy=64, cx=32, cy=32, width=64, height=64, c2w=c2w)
+
 
 def _tilted_capture(rng: np.random.Generator, tilt: np.ndarray, table: bool = True
                     ) -> tuple[np.ndarray, list[Camera], int]:
@@ -41,6 +43,7 @@ def _tilted_capture(rng: np.random.Generator, tilt: np.ndarray, table: bool = Tr
                                rng.uniform(-180, 180)))
     return points @ tilt.T, cameras, len(blob)
 
+
 def test_up_is_the_tilted_table_normal_at_any_roll():
     rng = np.random.default_rng(0)
     tilt = _rotation(np.array([0.6, 0.8, 0.0]), 35.0)
@@ -52,6 +55,7 @@ def test_up_is_the_tilted_table_normal_at_any_roll():
     assert isolated.plane.inlier_share > 0.5
     assert set(isolated.index) <= set(range(blob)) and len(isolated.index) > 0.5 * blob
 
+
 def test_without_a_plane_up_falls_back_to_the_cameras():
     rng = np.random.default_rng(1)
     points, cameras, blob = _tilted_capture(rng, np.eye(3), table=False)
@@ -62,6 +66,7 @@ def test_without_a_plane_up_falls_back_to_the_cameras():
     np.testing.assert_allclose(isolated.up, up_vector(np.stack([c.c2w for c in cameras])))
     assert isolated.up[2] > 0.99 and len(isolated.index) > 0.5 * blob
 
+
 def test_a_flat_wall_is_no_object():
     rng = np.random.default_rng(2)
     wall = np.column_stack([rng.uniform(-3, 3, 3000), np.zeros(3000), rng.uniform(-2, 2, 3000)])
@@ -69,6 +74,7 @@ def test_a_flat_wall_is_no_object():
                for x in np.linspace(-2, 2, 5) for z in (-0.5, 0.5)]
     with pytest.raises(UserError, match="no object found: .* one flat surface"):
         plane.isolate(wall, cameras)
+
 
 def test_a_landscape_is_no_object():
     """Photos panning across a distant hillside from a walk: nothing where the views meet."""
@@ -79,6 +85,7 @@ def test_a_landscape_is_no_object():
                        np.array([0.0, 0.0, 1.0]), 0.0) for x in np.linspace(-5, 5, 8)]
     with pytest.raises(UserError, match="no object found"):
         plane.isolate(hill, cameras)
+
 
 def test_a_wall_behind_the_object_is_no_support_for_upright_photos():
     """Upright photos from in front of a textured wall: the wall is a plane with every camera on

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from windowshop.config import PipelineConfig
+from windowshop.config import PipelineConfig, VideoOptions
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
 from windowshop.fit.evaluate import held_out_views, target_image
@@ -34,6 +34,7 @@ from windowshop.render.frames import render_camera
 from windowshop.scene import load_scene
 from windowshop.scene.hull import hull_points
 from windowshop.scene.types import Camera
+from windowshop.video.turntable import run_plan
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 OPAQUE = 0.1  # opacity that counts as something drawn
@@ -82,9 +83,10 @@ def silhouette(points: np.ndarray, camera: Camera, grow: int) -> np.ndarray:
     return hit[grow:-grow, grow:-grow]
 
 
-def unclean_share(run_dir: Path, turntable: list[Camera], device: torch.device) -> float | None:
+def unclean_share(run_dir: Path, options: VideoOptions, device: torch.device) -> float | None:
     """Share of the turntable's background (outside the grown visual hull) drawn opaque."""
     run = load_run(run_dir, device)
+    turntable = run_plan(run, options).cameras
     scene = load_scene(run.scene_source, run.scene_options)
     train = [v for v in scene.split("train") if v.alpha is not None]
     if not train:
@@ -120,7 +122,8 @@ def run_row(name: str, photos: list[Path], tmp: Path, device: torch.device) -> d
             "total_seconds": round(total, 2),
             "held_out_psnr": result.metrics.get("psnr"),
             "held_out_psnr_in_mask": masked_psnr(result.run_dir, device),
-            "background_unclean": unclean_share(result.run_dir, result.cameras, device)}
+            "background_unclean": unclean_share(result.run_dir, config.render, device),
+            "covered_degrees": result.report["covered_degrees"], "advice": result.report["advice"]}
 
 
 def main() -> None:

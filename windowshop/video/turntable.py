@@ -25,7 +25,7 @@ from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
 from windowshop.scene.types import BACKGROUNDS, Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
-from windowshop.video.paths import plan_turntable, write_camera_path
+from windowshop.video.paths import TurntablePlan, plan_turntable, write_camera_path
 
 NORMALISED_UP = (0.0, 0.0, 1.0)  # a normalised scene's up axis (SceneOptions.normalize)
 RENDER_SUMMARY = "render.json"  # in the run folder: the last turntable's path and coverage
@@ -119,8 +119,7 @@ def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs
     if options.background not in VIDEO_BACKGROUNDS:
         raise UserError(f"--background must be one of {', '.join(VIDEO_BACKGROUNDS)}, got {options.background!r}")
     run = load_run(run_dir, device)
-    up = np.array(NORMALISED_UP) if run.scene_options.normalize else None  # else fit to the cameras
-    plan = plan_turntable(run.train_cameras, options, run.bounds, up)
+    plan = run_plan(run, options)
     poster = plan.poster_frame if outputs.poster_frame is None else outputs.poster_frame
     outputs = dataclasses.replace(outputs, poster_frame=poster,
                                   transparent=options.background == "transparent")
@@ -131,6 +130,12 @@ def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs
                                  background=options.background)
     (Path(run_dir) / RENDER_SUMMARY).write_text(json.dumps(result.summary(), indent=2) + "\n")
     return result
+
+
+def run_plan(run, options: VideoOptions) -> TurntablePlan:
+    """The turntable cameras of a loaded run (`load_run`) for `options`, as `render_run` films."""
+    up = np.array(NORMALISED_UP) if run.scene_options.normalize else None  # else fit to the cameras
+    return plan_turntable(run.train_cameras, options, run.bounds, up)
 
 
 def default_outputs(out: str | Path, gif: bool | str = False, webp: bool | str = False,

@@ -29,6 +29,7 @@ from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
 
+EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
 
@@ -239,6 +240,23 @@ class FastModel(RadianceModel):
             grid.resize(shape)
         self.occupancy.set(torch.ones(tuple(s - 1 for s in shape), dtype=torch.bool,
                                       device=self.occupancy.occupied.device))
+
+    @property
+    def final_cells(self) -> tuple[int, int, int]:
+        """Occupancy cells per axis once the grids have grown: the resolution to carve at."""
+        return tuple(s - 1 for s in self.lattice(1.0))
+
+    @torch.no_grad()
+    def carve(self, hull: torch.Tensor) -> None:
+        """Confine the object to the carve mask `hull` (HX, HY, HZ) bool over the box (any
+        resolution; scene.hull.carve_mask): cells outside are never occupied, so never sampled,
+        trained or drawn, and the density at vertices with no cell inside starts empty (what
+        `density` tells an exporter). The mask is saved with the model."""
+        self.occupancy.carve(hull)
+        inside = self.occupancy.hull_at(self.occupancy.occupied.shape).float()
+        # a vertex touches the cells on either side of it along each axis
+        near = F.max_pool3d(F.pad(inside[None, None], (1, 1, 1, 1, 1, 1)), 2, stride=1)[0, 0]
+        self.density_grid.values[near.view(-1) == 0] = self._raw_at_alpha(EMPTY_ALPHA)
 
     @torch.no_grad()
     def refresh_occupancy(self) -> None:

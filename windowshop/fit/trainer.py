@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
@@ -34,6 +35,7 @@ from windowshop.fit.schedule import Hook, StepInfo, schedule_for
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
 from windowshop.render.frames import BACKGROUNDS
+from windowshop.scene.hull import carve_mask
 from windowshop.scene.types import Camera, Scene
 
 
@@ -106,7 +108,11 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group.setdefault("initial_lr", group["lr"])
-    progress = _restore(model, optimizer, resume) if resume else Progress()
+    if resume:
+        progress = _restore(model, optimizer, resume)  # with the carve it was trained with
+    else:
+        progress = Progress()
+        _carve(model, scene)
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
@@ -143,6 +149,19 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     model.load_state_dict(state["model_state"])
     optimizer.load_state_dict(state["optimizer_state"])
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
+
+
+def _carve(model: RadianceModel, scene: Scene) -> None:
+    """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
+    training masks, at the model's finest occupancy grid; scenes without masks stay whole."""
+    if not getattr(model.config, "carve", False) or scene.background != "alpha":
+        return
+    views = [v for v in scene.split("train") if v.alpha is not None]
+    if not views:
+        return
+    aabb = np.asarray(model.bounds.aabb, dtype=np.float64)
+    mask = carve_mask([v.camera for v in views], [v.alpha for v in views], aabb, model.final_cells)
+    model.carve(torch.from_numpy(mask))
 
 
 def _orbit(cameras: list[Camera], frames: int = 120) -> list[Camera]:

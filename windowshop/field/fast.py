@@ -6,7 +6,8 @@ packed volume rendering (render/packed.py). Colour is deferred: each ray's featu
 feature grid where a sample's weight matters and composited with those weights, are decoded once
 by a small MLP of the features and the view direction's spherical harmonics. The grids start
 coarse and grow (trilinear resampling) during training; the occupancy grid holds the cells with a
-corner dense enough to matter, refreshed every few steps. Rendering (eval mode) uses one fused
+corner dense enough to matter, refreshed every few steps; once `carve`d (the visual hull of a
+masked scene's photos), never a cell outside the hull. Rendering (eval mode) uses one fused
 kernel that also stops each ray once nothing behind can show (kernels.c render_ray).
 """
 

@@ -4,8 +4,10 @@ Each step runs the model's schedule hooks (learning rate, grid growth, ...: fit/
 draws `batch_rays` random rays across all training views, renders them over the scene's background
 (a random colour per ray for "alpha" scenes, the target composited over the same colour), steps
 the optimizer on the loss terms its config asks for (fit/losses.py), and logs loss, PSNR and
-throughput. Progress is the larger of steps/iters and seconds/budget, so with `seconds` the
-schedule follows elapsed training time. Callers follow and stop a fit through `FitCallbacks`.
+throughput. A fresh model of a masked scene is first carved to the visual hull of the training
+masks (models with a `carve`, when their config asks). Progress is the larger of steps/iters and
+seconds/budget, so with `seconds` the schedule follows elapsed training time. Callers follow and
+stop a fit through `FitCallbacks`.
 """
 
 from __future__ import annotations
@@ -112,7 +114,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         progress = _restore(model, optimizer, resume)  # with the carve it was trained with
     else:
         progress = Progress()
-        _carve(model, scene)
+        carve_to_scene(model, scene)
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
@@ -151,7 +153,7 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
 
 
-def _carve(model: RadianceModel, scene: Scene) -> None:
+def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
     """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
     training masks, at the model's finest occupancy grid; scenes without masks stay whole."""
     if not getattr(model.config, "carve", False) or scene.background != "alpha":

@@ -7,16 +7,17 @@ Rows (`--rows`, default the first five; each runs alone in under 10 minutes):
   fewer      lego --downscale 4 with 5, 10 and 25 training views; 30 s each    (report)
   turntable  120 frames at 256x256 of the lego100 model, rendered and encoded  (target <= 20 s)
   gpu        lego400 on CUDA for 60 s                                          (target PSNR >= 32)
-  carve      lego --downscale 4 over random backgrounds (masked by its alpha), 30 s, carve off
-             then on: occupied share, ms per step, held-out PSNR, turntable seconds  (report)
   profile    torch.profiler of training steps and turntable frames: where the time goes
+  carve      lego --downscale 4 over random backgrounds (masked by its alpha; or `--carve-scene`,
+             a prepared capture), 30 s, carve off then on: occupied share, ms per step, held-out
+             PSNR, turntable seconds                                           (report)
 
 Each training row records held-out PSNR against training seconds (`curve`, on a fixed random
 subset of the held-out pixels so that the NeRF's slow rendering stays affordable) and, in the same
 run, the same curve for `--model nerf --preset tiny` with the same budget (`--nerf-seconds` caps
 it; `--no-nerf` skips it). `psnr` is the fast model's mean over the full held-out views.
 Usage: python bench/bench_fast.py [--rows tiny lego100 ...] [--device cpu] [--no-nerf]
-       [--seconds S] [--nerf-seconds S]; plot the output with bench/plot_fast.py.
+       [--seconds S] [--nerf-seconds S] [--carve-scene DIR]; plot the output with bench/plot_fast.py.
 """
 
 from __future__ import annotations
@@ -193,7 +194,10 @@ def row_turntable(args, device, keep: dict):
 
 def row_carve(args, device):
     """The same masked fit with the grid carved by the visual hull and without, back to back."""
-    scene = lego(SceneOptions(downscale=4, test_views=25, background="alpha"))
+    if args.carve_scene:  # a prepared capture (masks/*.png): 3 photos held out
+        scene = load_scene(args.carve_scene, SceneOptions(test_views=3))
+    else:
+        scene = lego(SceneOptions(downscale=4, test_views=25, background="alpha"))
     seconds, probe, runs = args.seconds or 30.0, Probe(scene, device), []
     for carve in (False, True):
         load = os.getloadavg()
@@ -210,7 +214,8 @@ def row_carve(args, device):
                      "turntable_seconds": round(turntable(model, scene).render_seconds, 2)})
     start = time.perf_counter()  # the carve itself, once per fit before training (not counted)
     carve_to_scene(model_class("fast")(model.config, Bounds.of_scene(scene)), scene)
-    return {"row": "carve", "seconds": seconds, "train_views": len(scene.split("train")),
+    return {"row": "carve", "scene": str(scene.source), "background": scene.background,
+            "seconds": seconds, "train_views": len(scene.split("train")),
             "test_views": len(held_out_views(scene)), "voxels": model.config.voxels,
             "carve_seconds": round(time.perf_counter() - start, 2), "runs": runs}
 
@@ -286,6 +291,8 @@ def main() -> None:
     parser.add_argument("--nerf-seconds", type=float, default=None,
                         help="cap the NeRF's budget (lego400 defaults to 200 s to stay under 10 min)")
     parser.add_argument("--no-nerf", action="store_true", help="skip the NeRF comparison")
+    parser.add_argument("--carve-scene", default=None,
+                        help="the carve row's masked scene (default: lego --downscale 4, alpha)")
     args = parser.parse_args()
     device = pick_device(args.device)
     keep: dict = {}

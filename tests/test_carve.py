@@ -112,7 +112,7 @@ def test_nothing_outside_the_hull_is_drawn(cameras, fused, monkeypatch):
                                                                   near=0.1, far=10.0)).eval()
     with torch.no_grad():
         model.density_grid.values.fill_(50.0)  # opaque everywhere
-    model.carve(torch.from_numpy(touches_sphere(model.final_cells)))
+    model.carve(torch.from_numpy(touches_sphere(model.carve_cells)))
     assert model.density(torch.tensor([[-0.99, -0.99, -0.99]])) < 1e-3  # carved space is empty
     if not fused:
         monkeypatch.setattr(kernels, "available", lambda device: False)
@@ -155,7 +155,7 @@ def test_a_carved_fit_draws_nothing_outside_the_hull(carved_run):
     scene, out = carved_run
     model = load_run(out).model
     grid = model.occupancy
-    assert grid.hull is not None and grid.hull.shape == model.final_cells
+    assert grid.hull is not None and grid.hull.shape == model.carve_cells
     assert not torch.any(grid.occupied & ~grid.hull_at(grid.occupied.shape))
     # rays whose samples would all fall in carved cells: marched through the hull alone
     hull_only = OccupancyGrid(tuple(grid.hull.shape), grid.aabb, fused=False)

@@ -33,6 +33,7 @@ from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
 EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
+CARVE_VOXELS = 96**3  # the finest carve mask (FastModel.carve_cells)
 
 
 def lattice_shape(extent: torch.Tensor, voxels: int) -> tuple[int, int, int]:
@@ -243,9 +244,11 @@ class FastModel(RadianceModel):
                                       device=self.occupancy.occupied.device))
 
     @property
-    def final_cells(self) -> tuple[int, int, int]:
-        """Occupancy cells per axis once the grids have grown: the resolution to carve at."""
-        return tuple(s - 1 for s in self.lattice(1.0))
+    def carve_cells(self) -> tuple[int, int, int]:
+        """The resolution to carve at: the occupancy cells once the grids have grown, but no more
+        than about CARVE_VOXELS (carving 160^3 cells takes seconds; a coarser mask is as safe,
+        since the occupancy grid keeps every cell that overlaps it)."""
+        return tuple(s - 1 for s in lattice_shape(self.extent, min(self.voxels, CARVE_VOXELS)))
 
     @torch.no_grad()
     def carve(self, hull: torch.Tensor) -> None:

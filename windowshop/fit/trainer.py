@@ -162,7 +162,7 @@ def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
     if not views:
         return
     aabb = np.asarray(model.bounds.aabb, dtype=np.float64)
-    mask = carve_mask([v.camera for v in views], [v.alpha for v in views], aabb, model.final_cells)
+    mask = carve_mask([v.camera for v in views], [v.alpha for v in views], aabb, model.carve_cells)
     model.carve(torch.from_numpy(mask))
 
 

@@ -155,7 +155,8 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
 
 def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
     """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
-    training masks, at the model's finest occupancy grid; scenes without masks stay whole."""
+    training masks (at its `carve_cells`); scenes without masks stay whole, and so does a model
+    whose masks leave nothing (better floaters than no object at all)."""
     if not getattr(model.config, "carve", False) or scene.background != "alpha":
         return
     views = [v for v in scene.split("train") if v.alpha is not None]
@@ -163,7 +164,8 @@ def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
         return
     aabb = np.asarray(model.bounds.aabb, dtype=np.float64)
     mask = carve_mask([v.camera for v in views], [v.alpha for v in views], aabb, model.carve_cells)
-    model.carve(torch.from_numpy(mask))
+    if mask.any():
+        model.carve(torch.from_numpy(mask))
 
 
 def _orbit(cameras: list[Camera], frames: int = 120) -> list[Camera]:

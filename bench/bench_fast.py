@@ -8,13 +8,16 @@ Rows (`--rows`, default the first five; each runs alone in under 10 minutes):
   turntable  120 frames at 256x256 of the lego100 model, rendered and encoded  (target <= 20 s)
   gpu        lego400 on CUDA for 60 s                                          (target PSNR >= 32)
   profile    torch.profiler of training steps and turntable frames: where the time goes
+  carve      lego --downscale 4 over random backgrounds (masked by its alpha; or `--carve-scene`,
+             a prepared capture), 30 s, carve off then on: occupied share, ms per step, held-out
+             PSNR, turntable seconds                                           (report)
 
 Each training row records held-out PSNR against training seconds (`curve`, on a fixed random
 subset of the held-out pixels so that the NeRF's slow rendering stays affordable) and, in the same
 run, the same curve for `--model nerf --preset tiny` with the same budget (`--nerf-seconds` caps
 it; `--no-nerf` skips it). `psnr` is the fast model's mean over the full held-out views.
 Usage: python bench/bench_fast.py [--rows tiny lego100 ...] [--device cpu] [--no-nerf]
-       [--seconds S] [--nerf-seconds S]; plot the output with bench/plot_fast.py.
+       [--seconds S] [--nerf-seconds S] [--carve-scene DIR]; plot the output with bench/plot_fast.py.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
-from windowshop.fit.trainer import Progress, TrainingRun, train_step
+from windowshop.fit.trainer import Progress, TrainingRun, carve_to_scene, train_step
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -89,6 +92,7 @@ def start_run(scene, name: str, config, seconds: float, device: torch.device):
     torch.manual_seed(0)
     config = model_class(name).for_scene(config, scene)
     model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
+    carve_to_scene(model, scene)
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group["initial_lr"] = group["lr"]
@@ -182,17 +186,53 @@ def row_turntable(args, device, keep: dict):
         scene = lego(SceneOptions(downscale=4, test_views=25))
         probe = Probe(scene, device, pixels=256)
         keep["lego100"], _ = train(scene, "fast", model_config("fast"), 30.0, probe, [], device)
-    model = keep["lego100"].eval()
-    scene = lego(SceneOptions(downscale=4, test_views=25))
+    result = turntable(keep["lego100"], lego(SceneOptions(downscale=4, test_views=25)))
+    return {"row": "turntable", "target_seconds": 20.0, "frames": result.frames,
+            "size": [result.width, result.height], "seconds": round(result.render_seconds, 2),
+            "frames_per_second": round(result.frames_per_second, 2)}
+
+
+def row_carve(args, device):
+    """The same masked fit with the grid carved by the visual hull and without, back to back."""
+    if args.carve_scene:  # a prepared capture (masks/*.png): 3 photos held out
+        scene = load_scene(args.carve_scene, SceneOptions(test_views=3))
+    else:
+        scene = lego(SceneOptions(downscale=4, test_views=25, background="alpha"))
+    seconds, probe, runs = args.seconds or 30.0, Probe(scene, device), []
+    config = model_class("fast").for_scene(model_config("fast"), scene)
+    start = time.perf_counter()  # the carve itself, once per fit before training (not counted)
+    carve_to_scene(model_class("fast")(config, Bounds.of_scene(scene)), scene)
+    carve_seconds = time.perf_counter() - start
+    for carve in (False, True):
+        load = os.getloadavg()
+        model, run = train(scene, "fast", model_config("fast", carve=carve), seconds, probe, [], device)
+        start = time.perf_counter()
+        full = evaluate_views(model.eval(), held_out_views(scene), scene.background)
+        hull = model.occupancy.hull
+        runs.append({"carve": carve, "load_average": load, "iterations": run["iterations"],
+                     "ms_per_step": round(1000 * run["train_seconds"] / run["iterations"], 1),
+                     "occupied_share": round(model.occupancy.fraction(), 4),
+                     "hull_share": None if hull is None else round(float(hull.float().mean()), 4),
+                     "psnr": round(full["psnr"], 3), "ssim": round(full["ssim"], 4),
+                     "eval_seconds": round(time.perf_counter() - start, 2),
+                     "turntable_seconds": round(turntable(model, scene).render_seconds, 2)})
+    return {"row": "carve", "scene": str(scene.source), "background": scene.background,
+            "seconds": seconds, "train_views": len(scene.split("train")),
+            "test_views": len(held_out_views(scene)), "voxels": config.voxels,
+            "carve_seconds": round(carve_seconds, 2), "runs": runs}
+
+
+def turntable(model, scene):
+    """Render and encode `model`'s 120-frame 256x256 orbit of `scene`'s cameras (render_turntable's
+    result, its `render_seconds` included)."""
+    model = model.eval()
     options = VideoOptions(frames=120, width=256, height=256)
     cameras = turntable_path([v.camera for v in scene.split("train")], options)
     with tempfile.TemporaryDirectory() as out:
         result = render_turntable(model, cameras, VideoOutputs(mp4=Path(out) / "turntable.mp4"),
                                   options.fps, display_background(scene.background),
                                   chunk=options.chunk, progress=False)
-    return {"row": "turntable", "target_seconds": 20.0, "frames": result.frames,
-            "size": [result.width, result.height], "seconds": round(result.render_seconds, 2),
-            "frames_per_second": round(result.frames_per_second, 2)}
+    return result
 
 
 def row_gpu(args, device):
@@ -242,7 +282,7 @@ def row_profile(args, device):
             "render_top_ops": _top_ops(render_prof, len(cameras)), "probe_psnr": round(probe.psnr(model), 2)}
 
 
-ROWS = ["tiny", "lego100", "lego400", "fewer", "turntable", "gpu", "profile"]
+ROWS = ["tiny", "lego100", "lego400", "fewer", "turntable", "gpu", "profile", "carve"]
 
 
 def main() -> None:
@@ -253,6 +293,8 @@ def main() -> None:
     parser.add_argument("--nerf-seconds", type=float, default=None,
                         help="cap the NeRF's budget (lego400 defaults to 200 s to stay under 10 min)")
     parser.add_argument("--no-nerf", action="store_true", help="skip the NeRF comparison")
+    parser.add_argument("--carve-scene", default=None,
+                        help="the carve row's masked scene (default: lego --downscale 4, alpha)")
     args = parser.parse_args()
     device = pick_device(args.device)
     keep: dict = {}

@@ -83,6 +83,7 @@ class FastConfig:
     render_threshold: float = 1e-3  # ... when rendering, where rays also stop at this transmittance
     distortion: float = 0.0  # weight of mip-NeRF 360's distortion loss (concentrates each ray's weight)
     tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
+    carve: bool = True  # masked scenes: never occupy space outside the visual hull of the masks
 
 
 FAST_PRESETS = {

@@ -6,7 +6,8 @@ packed volume rendering (render/packed.py). Colour is deferred: each ray's featu
 feature grid where a sample's weight matters and composited with those weights, are decoded once
 by a small MLP of the features and the view direction's spherical harmonics. The grids start
 coarse and grow (trilinear resampling) during training; the occupancy grid holds the cells with a
-corner dense enough to matter, refreshed every few steps. Rendering (eval mode) uses one fused
+corner dense enough to matter, refreshed every few steps; once `carve`d (the visual hull of a
+masked scene's photos), never a cell outside the hull. Rendering (eval mode) uses one fused
 kernel that also stops each ray once nothing behind can show (kernels.c render_ray).
 """
 
@@ -29,8 +30,10 @@ from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
 
+EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
+CARVE_VOXELS = 96**3  # the finest carve mask (FastModel.carve_cells)
 
 
 def lattice_shape(extent: torch.Tensor, voxels: int) -> tuple[int, int, int]:
@@ -239,6 +242,25 @@ class FastModel(RadianceModel):
             grid.resize(shape)
         self.occupancy.set(torch.ones(tuple(s - 1 for s in shape), dtype=torch.bool,
                                       device=self.occupancy.occupied.device))
+
+    @property
+    def carve_cells(self) -> tuple[int, int, int]:
+        """The resolution to carve at: the occupancy cells once the grids have grown, but no more
+        than about CARVE_VOXELS (carving 160^3 cells takes seconds; a coarser mask is as safe,
+        since the occupancy grid keeps every cell that overlaps it)."""
+        return tuple(s - 1 for s in lattice_shape(self.extent, min(self.voxels, CARVE_VOXELS)))
+
+    @torch.no_grad()
+    def carve(self, hull: torch.Tensor) -> None:
+        """Confine the object to the carve mask `hull` (HX, HY, HZ) bool over the box (any
+        resolution; scene.hull.carve_mask): cells outside are never occupied, so never sampled,
+        trained or drawn, and the density at vertices with no cell inside starts empty (what
+        `density` tells an exporter). The mask is saved with the model."""
+        self.occupancy.carve(hull)
+        inside = self.occupancy.hull_at(self.occupancy.occupied.shape).float()
+        # a vertex touches the cells on either side of it along each axis
+        near = F.max_pool3d(F.pad(inside[None, None], (1, 1, 1, 1, 1, 1)), 2, stride=1)[0, 0]
+        self.density_grid.values[near.view(-1) == 0] = self._raw_at_alpha(EMPTY_ALPHA)
 
     @torch.no_grad()
     def refresh_occupancy(self) -> None:

@@ -59,8 +59,22 @@ def march_reference(origins: torch.Tensor, directions: torch.Tensor, t_min: torc
     return Samples(t=t[ray, index], ray=ray, counts=keep.sum(dim=1))
 
 
+def hull_cells(hull: torch.Tensor, cells: tuple[int, int, int]) -> torch.Tensor:
+    """A carve mask `hull` (HX, HY, HZ) bool over the box, as `cells` (OX, OY, OZ) bool: a cell
+    is in the hull when any hull cell it overlaps is (so a coarser grid never cuts the object)."""
+    if tuple(hull.shape) == tuple(cells):
+        return hull
+    # adaptive pooling's window for output i spans input floor(i n / m) to ceil((i + 1) n / m):
+    # exactly the input cells that output cell overlaps, whether it is coarser or finer
+    peak = F.adaptive_max_pool3d(hull[None, None].float(), tuple(cells))
+    return peak[0, 0] > 0
+
+
 class OccupancyGrid(nn.Module):
-    """A boolean grid of (OX, OY, OZ) cells tiling the box `aabb`; all cells start occupied."""
+    """A boolean grid of (OX, OY, OZ) cells tiling the box `aabb`; all cells start occupied.
+
+    After `carve(hull)`, cells outside the hull are never occupied, whatever `set` is given.
+    """
 
     def __init__(self, cells: tuple[int, int, int], aabb: torch.Tensor, fused: bool = True):
         super().__init__()
@@ -71,6 +85,8 @@ class OccupancyGrid(nn.Module):
         # cell sets, so marching can jump over empty blocks whole
         self.register_buffer("cells", torch.ones(cells, dtype=torch.uint8), persistent=False)
         self.register_buffer("blocks", self._blocks(self.occupied), persistent=False)
+        self.register_buffer("hull", None)  # (HX, HY, HZ) bool once carved; saved with the model
+        self._hull_at: torch.Tensor | None = None  # the hull at the occupied cells' size
 
     @staticmethod
     def _blocks(occupied: torch.Tensor) -> torch.Tensor:
@@ -79,10 +95,28 @@ class OccupancyGrid(nn.Module):
         return (peak[0, 0] > 0).to(torch.uint8)
 
     def set(self, occupied: torch.Tensor) -> None:
-        """Replace the occupied cells by `occupied` (OX, OY, OZ) bool, of this or a new size."""
-        self.occupied = occupied.to(torch.bool).contiguous()
+        """Replace the occupied cells by `occupied` (OX, OY, OZ) bool, of this or a new size
+        (less the cells outside the hull, once carved)."""
+        occupied = occupied.to(torch.bool)
+        if self.hull is not None:
+            occupied = occupied & self.hull_at(occupied.shape)
+        self.occupied = occupied.contiguous()
         self.cells = self.occupied.to(torch.uint8)
         self.blocks = self._blocks(self.occupied)
+
+    def carve(self, hull: torch.Tensor) -> None:
+        """From now on, occupy only cells that overlap the carve mask `hull` (HX, HY, HZ) bool
+        (any resolution over the same box)."""
+        self.hull = hull.to(device=self.occupied.device, dtype=torch.bool).contiguous()
+        self._hull_at = None
+        self.set(self.occupied)
+
+    def hull_at(self, cells: tuple[int, int, int]) -> torch.Tensor:
+        """(OX, OY, OZ) bool: the hull at `cells` (cached: refreshes reuse the current size)."""
+        cached = self._hull_at
+        if cached is None or tuple(cached.shape) != tuple(cells) or cached.device != self.hull.device:
+            self._hull_at = hull_cells(self.hull, cells)
+        return self._hull_at
 
     @property
     def inv_cell(self) -> torch.Tensor:
@@ -127,5 +161,8 @@ class OccupancyGrid(nn.Module):
         saved = state_dict.get(prefix + "occupied")
         if saved is not None and saved.shape != self.occupied.shape:
             self.occupied = torch.ones(saved.shape, dtype=torch.bool, device=self.occupied.device)
+        hull = state_dict.get(prefix + "hull")  # a carved model's; None buffers expect no key
+        self.hull = None if hull is None else torch.empty_like(hull, device=self.occupied.device)
+        self._hull_at = None
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
         self.set(self.occupied)

@@ -4,8 +4,10 @@ Each step runs the model's schedule hooks (learning rate, grid growth, ...: fit/
 draws `batch_rays` random rays across all training views, renders them over the scene's background
 (a random colour per ray for "alpha" scenes, the target composited over the same colour), steps
 the optimizer on the loss terms its config asks for (fit/losses.py), and logs loss, PSNR and
-throughput. Progress is the larger of steps/iters and seconds/budget, so with `seconds` the
-schedule follows elapsed training time. Callers follow and stop a fit through `FitCallbacks`.
+throughput. A fresh model of a masked scene is first carved to the visual hull of the training
+masks (models with a `carve`, when their config asks). Progress is the larger of steps/iters and
+seconds/budget, so with `seconds` the schedule follows elapsed training time. Callers follow and
+stop a fit through `FitCallbacks`.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
@@ -33,6 +36,7 @@ from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
 from windowshop.fit.schedule import Hook, StepInfo, schedule_for
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
+from windowshop.scene.hull import carve_mask
 from windowshop.scene.types import BACKGROUNDS, Camera, Scene
 
 
@@ -105,7 +109,11 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group.setdefault("initial_lr", group["lr"])
-    progress = _restore(model, optimizer, resume) if resume else Progress()
+    if resume:
+        progress = _restore(model, optimizer, resume)  # with the carve it was trained with
+    else:
+        progress = Progress()
+        carve_to_scene(model, scene)
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
@@ -142,6 +150,21 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     model.load_state_dict(state["model_state"])
     optimizer.load_state_dict(state["optimizer_state"])
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
+
+
+def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
+    """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
+    training masks (at its `carve_cells`); scenes without masks stay whole, and so does a model
+    whose masks leave nothing (better floaters than no object at all)."""
+    if not getattr(model.config, "carve", False) or scene.background != "alpha":
+        return
+    views = [v for v in scene.split("train") if v.alpha is not None]
+    if not views:
+        return
+    aabb = np.asarray(model.bounds.aabb, dtype=np.float64)
+    mask = carve_mask([v.camera for v in views], [v.alpha for v in views], aabb, model.carve_cells)
+    if mask.any():
+        model.carve(torch.from_numpy(mask))
 
 
 def _orbit(cameras: list[Camera], frames: int = 120) -> list[Camera]:

@@ -1,6 +1,7 @@
 """`windowshop video` on every shared real capture, with the product's defaults, as JSON.
 
     python bench/bench_real.py [--rows beer_can fruit dtu_skull kermit] [--photos 20] [--out FILE]
+                               [--set fit.seconds=30 ...]
 
 Per capture: seconds per stage and in all, photos placed, the mask kind, the held-out PSNR (every
 8th photo, over white) and the same PSNR within the photo's object mask, and how clean the
@@ -28,6 +29,8 @@ from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
 from windowshop.fit.evaluate import held_out_views, target_image
 from windowshop.metrics import psnr
+from windowshop.model import apply_run_overrides
+from windowshop.overrides import parse_assignments
 from windowshop.pipeline import make_video
 from windowshop.rays import project
 from windowshop.render.frames import render_camera
@@ -107,12 +110,12 @@ def unclean_share(run_dir: Path, options: VideoOptions, device: torch.device) ->
     return dirty / max(background, 1)
 
 
-def run_row(name: str, photos: list[Path], tmp: Path, device: torch.device) -> dict:
+def run_row(name: str, photos: list[Path], tmp: Path, device: torch.device,
+            config: PipelineConfig) -> dict:
     folder = tmp / name / "photos"
     folder.mkdir(parents=True)
     for path in photos:
         (folder / path.name).symlink_to(path)
-    config = PipelineConfig()
     start = time.perf_counter()
     result = make_video(folder, tmp / name / "spin.mp4", config, device=device, show=False)
     total = time.perf_counter() - start
@@ -131,17 +134,20 @@ def main() -> None:
     parser.add_argument("--rows", nargs="+", default=["beer_can", "fruit", "dtu_skull", "kermit"])
     parser.add_argument("--photos", type=int, default=20, help="photos taken from each capture")
     parser.add_argument("--out", default=None, help="also write the JSON here")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a pipeline setting other than the default, e.g. fit.seconds=30")
     args = parser.parse_args()
     device = pick_device(None)
+    config = apply_run_overrides(PipelineConfig(), parse_assignments(args.set), "--set")
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip()
-    results = {"commit": commit, "machine": f"{platform.processor() or platform.machine()}, "
+    results = {"commit": commit, "settings": args.set, "machine": f"{platform.processor() or platform.machine()}, "
                f"{os.cpu_count()} cores", "device": str(device), "rows": {}}
     photos = captures(args.photos)
     with tempfile.TemporaryDirectory(prefix="windowshop-bench-real-") as tmp:
         for name in args.rows:
             try:
-                results["rows"][name] = run_row(name, photos[name], Path(tmp), device)
+                results["rows"][name] = run_row(name, photos[name], Path(tmp), device, config)
             except Exception as err:  # noqa: BLE001 - a capture that fails is a result too
                 results["rows"][name] = {"error": f"{type(err).__name__}: {err}"}
             print(json.dumps({name: results["rows"][name]}), flush=True)

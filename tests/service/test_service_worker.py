@@ -257,5 +257,7 @@ def test_service_settings_reach_the_pipeline(monkeypatch, tmp_path):
                    {"seconds": 5})  # a time budget would lift the service's step cap
     with pytest.raises(UserError, match="must be an integer"):
         job_config(settings, {"render.frames": "many"})
+    with pytest.raises(UserError, match="MP4 turntables, which have no alpha"):
+        job_config(settings, {"render.background": "transparent"})
     save_job_config(tmp_path, mine)
     assert load_job_config(tmp_path, settings) == mine

@@ -115,6 +115,10 @@ def job_config(settings: ServiceSettings, overrides: dict) -> PipelineConfig:
         limit, asked = _get(settings.job, path), _get(config, path)
         if limit is not None and (asked is None or asked > limit):
             raise UserError(f"settings: {path} may be at most {limit} on this service, got {asked}")
+    if config.render.background == "transparent":
+        raise UserError("settings: the service serves MP4 turntables, which have no alpha; a "
+                        "transparent one is `windowshop video ... --out spin.webm --background "
+                        "transparent`")
     return config
 
 

@@ -48,7 +48,7 @@ def advice(report: dict) -> list[str]:
     """Concrete things to do better, from a quality report's facts (most important first)."""
     tips = []
     if report.get("unplaced"):
-        tips.append(f"{_names(report['unplaced'])} could not be placed: retake them so each shares "
+        tips.append(f"{_names(report['unplaced'])} could not be placed: retake so each photo shares "
                     "most of its view with the photo before it")
     blurred = [name for name, why in report.get("dropped", {}).items() if "blur" in why]
     if blurred:

@@ -106,7 +106,7 @@ def test_a_job_may_lower_its_settings_but_not_raise_them(client):
     assert config.render.frames == 12 and config.fit == client.settings.job.fit
     detail = refused(client.post("/api/jobs", files=photos(3),
                                  data={"settings": '{"fit.seconds": 9999}'}), 422, "bad_settings")
-    assert "fit.seconds may be at most 60" in detail
+    assert "fit.seconds may be at most 30" in detail
     refused(client.post("/api/jobs", files=photos(3), data={"settings": "[1]"}), 422, "bad_settings")
     refused(client.post("/api/jobs", files=photos(3), data={"settings": '{"warp": 9}'}), 422,
             "bad_settings")

@@ -250,7 +250,7 @@ def test_service_settings_reach_the_pipeline(monkeypatch, tmp_path):
     settings = ServiceSettings(job=PipelineConfig())
     mine = job_config(settings, {"render.frames": 12, "fit.seconds": 5, "voxel_pixels": 2})
     assert (mine.render.frames, mine.fit.seconds, mine.model_settings) == (12, 5.0, {"voxel_pixels": 2})
-    with pytest.raises(UserError, match="fit.seconds may be at most 60"):
+    with pytest.raises(UserError, match="fit.seconds may be at most 30"):
         job_config(settings, {"fit.seconds": 600})
     with pytest.raises(UserError, match="fit.iters may be at most"):
         job_config(ServiceSettings(job=PipelineConfig(fit=FitConfig(iters=50, seconds=None))),

@@ -139,7 +139,8 @@ def coverage_plot(out: Path, report: dict) -> Path:
         ax.bar(np.radians(start + span / 2), 90, width=np.radians(span), bottom=0, color="tab:red",
                alpha=0.15, zorder=1)
     ax.set_ylim(0, 90)
-    ax.set_yticks([30, 60, 90], labels=["60°", "30°", "0°"])
+    ax.set_yticks([30, 60, 90], labels=["60°", "30°", "0°"])  # elevations, away from the azimuths
+    ax.set_rlabel_position(202.5)
     ax.set_title("cameras around the object (red: not photographed)", fontsize=9)
     fig.tight_layout()
     fig.savefig(out, dpi=90)

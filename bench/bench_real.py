@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy import ndimage
 
 from windowshop.config import PipelineConfig, VideoOptions
 from windowshop.device import pick_device
@@ -36,7 +37,7 @@ from windowshop.rays import project
 from windowshop.render.frames import render_camera
 from windowshop.scene import load_scene
 from windowshop.scene.hull import hull_points
-from windowshop.scene.types import Camera
+from windowshop.scene.types import Camera, Scene
 from windowshop.video.turntable import run_plan
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -59,10 +60,8 @@ def captures(count: int) -> dict[str, list[Path]]:
             "kermit": sorted((DATA / "kermit").glob("*.jpg"))}
 
 
-def masked_psnr(run_dir: Path, device: torch.device) -> float | None:
+def masked_psnr(run, scene: Scene) -> float | None:
     """Mean PSNR of the held-out photos within their object masks (None without masks)."""
-    run = load_run(run_dir, device)
-    scene = load_scene(run.scene_source, run.scene_options)
     scores = []
     for view in held_out_views(scene):
         if view.alpha is None:
@@ -78,19 +77,15 @@ def silhouette(points: np.ndarray, camera: Camera, grow: int) -> np.ndarray:
     uv, depth = project(points, camera)
     u, v = np.round(uv[depth > 0]).astype(int).T
     hit = np.zeros((camera.height + 2 * grow, camera.width + 2 * grow), bool)
-    for du in range(-grow, grow + 1):  # a square brush: every pixel within `grow` of a point
-        for dv in range(-grow, grow + 1):
-            uu, vv = u + du + grow, v + dv + grow
-            ok = (uu >= 0) & (vv >= 0) & (uu < hit.shape[1]) & (vv < hit.shape[0])
-            hit[vv[ok], uu[ok]] = True
-    return hit[grow:-grow, grow:-grow]
+    ok = (u >= -grow) & (v >= -grow) & (u < camera.width + grow) & (v < camera.height + grow)
+    hit[v[ok] + grow, u[ok] + grow] = True  # points just off the image still reach into it
+    brush = np.ones((2 * grow + 1, 2 * grow + 1), bool)  # every pixel within `grow` of a point
+    return ndimage.binary_dilation(hit, brush)[grow:-grow, grow:-grow]
 
 
-def unclean_share(run_dir: Path, options: VideoOptions, device: torch.device) -> float | None:
+def unclean_share(run, scene: Scene, options: VideoOptions) -> float | None:
     """Share of the turntable's background (outside the grown visual hull) drawn opaque."""
-    run = load_run(run_dir, device)
     turntable = run_plan(run, options).cameras
-    scene = load_scene(run.scene_source, run.scene_options)
     train = [v for v in scene.split("train") if v.alpha is not None]
     if not train:
         return None
@@ -120,12 +115,14 @@ def run_row(name: str, photos: list[Path], tmp: Path, device: torch.device,
     result = make_video(folder, tmp / name / "spin.mp4", config, device=device, show=False)
     total = time.perf_counter() - start
     report = json.loads((result.scene_dir / "report.json").read_text())
+    run = load_run(result.run_dir, device)
+    scene = load_scene(run.scene_source, run.scene_options)
     return {"photos": len(photos), "placed": report.get("placed"), "masks": report.get("masks"),
             "seconds": {k: round(v, 2) for k, v in result.seconds.items()},
             "total_seconds": round(total, 2),
             "held_out_psnr": result.metrics.get("psnr"),
-            "held_out_psnr_in_mask": masked_psnr(result.run_dir, device),
-            "background_unclean": unclean_share(result.run_dir, config.render, device),
+            "held_out_psnr_in_mask": masked_psnr(run, scene),
+            "background_unclean": unclean_share(run, scene, config.render),
             "covered_degrees": result.report["covered_degrees"], "advice": result.report["advice"]}
 
 

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from windowshop.errors import UserError
-from windowshop.overrides import apply_overrides, leaves
+from windowshop.overrides import apply_overrides, leaves, named
 
 
 @dataclass(frozen=True)
@@ -109,20 +109,15 @@ def apply_run_overrides(config: Any, overrides: dict[str, Any], where: str = "se
     model = overrides.get("model", config.model)
     names = {f.name for f in dataclasses.fields(model_class(model).config_type)}
     paths = leaves(type(config))
-    if unknown := sorted(k for k in overrides if not _known(k, paths) and "." not in k
+    if unknown := sorted(k for k in overrides if not named(k, paths) and "." not in k
                          and k.replace("-", "_") not in names):
         raise UserError(f"{where}: model {model!r} has no setting {', '.join(unknown)}; its "
                         f"settings: {', '.join(sorted(names))}; the run's: {', '.join(sorted(paths))}")
-    routed = {(f"model_settings.{k}" if k.replace("-", "_") in names and not _known(k, paths) else k): v
+    routed = {(f"model_settings.{k}" if k.replace("-", "_") in names and not named(k, paths) else k): v
               for k, v in overrides.items()}
     config = apply_overrides(config, routed, where)
     model_config(config.model, config.preset, **config.model_settings)  # a bad setting fails now
     return config
-
-
-def _known(key: str, paths: dict) -> bool:
-    key = key.replace("-", "_")
-    return key in paths or any(p.endswith("." + key) for p in paths)
 
 
 def model_config(name: str, preset: str | None = None, **overrides: Any) -> Any:

@@ -72,6 +72,13 @@ def leaves(cls: type, prefix: str = "") -> dict[str, tuple[type, dataclasses.Fie
     return out
 
 
+def named(key: str, paths: dict[str, Any]) -> list[str]:
+    """The paths of `paths` (from `leaves`) that the key `key` names: itself, or every path
+    ending in `.key` (more than one: ambiguous; none: no such setting)."""
+    key = key.replace("-", "_")
+    return [key] if key in paths else [p for p in paths if p.endswith("." + key)]
+
+
 def _resolve(key: str, paths: dict[str, Any], where: str) -> str:
     """The full dotted path `key` names: itself, the one path ending in `.key`, or an entry
     `name.entry` of a dict field `name` (checked by whoever reads the dict)."""
@@ -79,7 +86,7 @@ def _resolve(key: str, paths: dict[str, Any], where: str) -> str:
     head = key.rpartition(".")[0]
     if key in paths or (head in paths and _hints(paths[head][0])[paths[head][1].name] is dict):
         return key
-    matches = [p for p in paths if p.endswith("." + key)]
+    matches = named(key, paths)
     if len(matches) == 1:
         return matches[0]
     if matches:
@@ -204,13 +211,14 @@ def add_flags(parser: argparse.ArgumentParser, cls: type, title: str | None = No
         if stage and counts[name] == 1:
             flags.insert(0, f"--{name.replace('_', '-')}")
         kind, extra = _flag_type(_hints(owner)[f.name])
-        default = _get(defaults, path)
+        default = get_path(defaults, path)
         text = field_help(owner).get(f.name, "")
         groups[stage].add_argument(*flags, dest=DEST + path, type=kind, default=None,
                                    help=f"{text} (default: {default})".replace("%", "%%"), **extra)
 
 
-def _get(config: Any, path: str) -> Any:
+def get_path(config: Any, path: str) -> Any:
+    """The value at the dotted `path` of a nested config."""
     for part in path.split("."):
         config = getattr(config, part)
     return config

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from windowshop.scene.types import Camera, Scene
-from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about
+from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, gaps_between
 
 GAP_DEGREES = 60.0  # an empty arc of azimuth at least this wide is worth walking again
 FEW_PHOTOS = 12  # placed photos under this: advise more
@@ -39,8 +39,7 @@ def camera_angles(cameras: list[Camera], centre: np.ndarray) -> tuple[np.ndarray
 
 def empty_arcs(azimuths: np.ndarray, min_gap: float = GAP_DEGREES) -> list[tuple[float, float]]:
     """(from, to) degrees of every arc of azimuth at least `min_gap` wide with no camera, in order."""
-    a = np.sort(np.asarray(azimuths, dtype=float) % 360.0)
-    gaps = np.diff(np.append(a, a[0] + 360.0))
+    a, gaps = gaps_between(azimuths)
     return [(float(a[i]), float((a[i] + gaps[i]) % 360.0)) for i in range(len(a)) if gaps[i] >= min_gap]
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+import sphere_helpers
 from windowshop.config import FastConfig, FitConfig
 from windowshop.field import kernels
 from windowshop.field.fast import FastModel
@@ -15,7 +16,7 @@ from windowshop.fit.trainer import fit
 from windowshop.model import Bounds
 from windowshop.rays import camera_rays
 from windowshop.scene import hull
-from windowshop.scene.synthetic import orbit_cameras, synthetic_scene
+from windowshop.scene.synthetic import synthetic_scene
 
 BOX = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
 CENTRE, RADIUS = np.array([0.2, -0.1, 0.3]), 0.5
@@ -23,22 +24,7 @@ CELLS = (24, 24, 24)
 
 
 def sphere_mask(cam, centre=CENTRE, radius=RADIUS):
-    """Exact silhouette (H, W) of a sphere: pixels whose ray passes within `radius` of `centre`."""
-    j, i = np.mgrid[0:cam.height, 0:cam.width] + 0.5
-    d = np.stack([(i - cam.cx) / cam.fx, -(j - cam.cy) / cam.fy, -np.ones_like(i)], -1) @ cam.c2w[:3, :3].T
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    oc = centre - cam.center
-    miss = np.linalg.norm(oc - (d @ oc)[..., None] * d, axis=-1)
-    return (miss < radius).astype(np.float32)
-
-
-def all_around(n_upper=24, n_lower=12, size=64):
-    """Cameras above and (mirrored) below the equator, so that a hull closes underneath."""
-    cams = orbit_cameras(n_upper, size) + orbit_cameras(n_lower, size, offset=0.5)
-    for c in cams[n_upper:]:
-        c.c2w[2, :] *= -1
-        c.c2w[:3, 1] *= -1  # keep a right-handed rotation
-    return cams
+    return sphere_helpers.sphere_mask(cam, centre, radius)
 
 
 def cell_centres(cells=CELLS, box=BOX):
@@ -56,7 +42,7 @@ def touches_sphere(cells=CELLS, box=BOX):
 
 @pytest.fixture(scope="module")
 def cameras():
-    return all_around()
+    return sphere_helpers.all_around()
 
 
 def test_the_carve_mask_holds_a_sphere_and_not_the_corners(cameras):

@@ -10,10 +10,9 @@ import pytest
 from windowshop.config import VideoOptions
 from windowshop.model import Bounds
 from windowshop.rays import project
-from windowshop.scene.cameras import look_at
+from windowshop.scene.cameras import box_corners, look_at
 from windowshop.scene.types import Camera
 from windowshop.video.coverage import best_covered_frame, covered_arc, swing_azimuths
-from windowshop.video.framing import box_corners
 from windowshop.video.paths import plan_turntable
 
 WIDE = (0.01, 100.0)  # near/far that never limit the distance

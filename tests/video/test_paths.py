@@ -177,7 +177,7 @@ def test_lego_orbit_matches_its_capture_ring():
     from windowshop.config import SceneOptions
     from windowshop.scene import load_scene
 
-    from windowshop.video.framing import box_corners
+    from windowshop.scene.cameras import box_corners
 
     scene = load_scene(LEGO, SceneOptions(max_side=20, test_views=1))  # few images: quick
     train = [v.camera for v in scene.split("train")]

@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from windowshop.rays import project
 from windowshop.scene import normalize
-from windowshop.scene.cameras import nearest_point_to_axes
+from windowshop.scene.cameras import box_corners, nearest_point_to_axes
 from windowshop.scene.types import Camera
 
 MOST_VIEWS = 0.75  # a point counts as the object's when at least this share of views see it ...
@@ -78,10 +78,7 @@ def plain_colour(pixels: np.ndarray) -> np.ndarray | None:
 def box_region(aabb: np.ndarray, camera: Camera, margin: float = 0.05) -> np.ndarray:
     """(H, W) bool: the image rectangle around the box `aabb` (2, 3) (in the camera's world),
     grown by `margin` of the image size."""
-    lo, hi = aabb
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])
-    uv, depth = project(corners, camera)
+    uv, depth = project(box_corners(aabb), camera)
     region = np.zeros((camera.height, camera.width), dtype=bool)
     if np.any(depth <= 0):  # a camera inside or beside the box: no useful rectangle
         region[:] = True

@@ -21,6 +21,7 @@ import numpy as np
 from scipy import ndimage
 
 from windowshop.rays import project
+from windowshop.scene.cameras import box_corners
 from windowshop.scene.hull import GRID, hull_points
 from windowshop.scene.types import Camera
 
@@ -46,11 +47,6 @@ class View:
     background_uv: np.ndarray  # (B, 2) points off the object: the support surface, the room
 
 
-def _corners(aabb: np.ndarray) -> np.ndarray:
-    """(8, 3) corners of a box (2, 3)."""
-    return np.array([[x, y, z] for x in aabb[:, 0] for y in aabb[:, 1] for z in aabb[:, 2]])
-
-
 def _disks(shape: tuple[int, int], uv: np.ndarray, radius: int) -> np.ndarray:
     """(H, W) bool: disks of `radius` px around the pixels `uv` (N, 2) inside the image."""
     out = np.zeros(shape, dtype=np.uint8)
@@ -71,7 +67,7 @@ def box_outline(aabb: np.ndarray, camera: Camera, grow: float = MARGIN) -> np.nd
     """(H, W) bool: the projected box `aabb` (2, 3), grown by `grow` of the image diagonal;
     the whole image when a camera sits inside or beside the box."""
     shape = (camera.height, camera.width)
-    uv, depth = project(_corners(aabb), camera)
+    uv, depth = project(box_corners(aabb), camera)
     if np.any(depth <= 0):
         return np.ones(shape, dtype=bool)
     outline = _polygon(shape, uv)

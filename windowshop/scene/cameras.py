@@ -122,3 +122,9 @@ def _level_up(c2ws: np.ndarray) -> np.ndarray:
     up = eigvecs[:, 0] if eigvals[1] > 0.02 else mean_up
     up = up if up @ mean_up >= 0 else -up
     return up / np.linalg.norm(up)
+
+
+def box_corners(aabb) -> np.ndarray:
+    """The eight corners (8, 3) of the box `aabb` ((3,) min corner, (3,) max corner)."""
+    lo, hi = np.asarray(aabb, dtype=np.float64)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from windowshop.scene.cameras import box_corners
 from windowshop.scene.types import Camera, Scene
 
 SPLIT_COLOURS = {"train": "tab:blue", "val": "tab:orange", "test": "tab:red"}
@@ -26,8 +27,7 @@ def frustum_lines(camera: Camera, depth: float) -> list[np.ndarray]:
 
 def box_lines(aabb: np.ndarray) -> list[np.ndarray]:
     """The 12 edges (2, 3) of an axis-aligned box (2, 3)."""
-    lo, hi = aabb
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(aabb)
     return [np.stack([corners[a], corners[b]]) for a in range(8) for b in range(a + 1, 8)
             if np.sum(corners[a] != corners[b]) == 1]
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
+from windowshop.overrides import get_path
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.service.db import SQLiteJobStore
 from windowshop.service.settings import ServiceSettings, job_dir
@@ -112,19 +113,13 @@ def job_config(settings: ServiceSettings, overrides: dict) -> PipelineConfig:
 
     config = apply_run_overrides(settings.job, overrides, "settings")
     for path in CAPPED:
-        limit, asked = _get(settings.job, path), _get(config, path)
+        limit, asked = get_path(settings.job, path), get_path(config, path)
         if limit is not None and (asked is None or asked > limit):
             raise UserError(f"settings: {path} may be at most {limit} on this service, got {asked}")
     if config.render.background == "transparent":
         raise UserError("settings: the service serves MP4 turntables, which have no alpha; a "
                         "transparent one is `windowshop video ... --out spin.webm --background "
                         "transparent`")
-    return config
-
-
-def _get(config, path: str):
-    for part in path.split("."):
-        config = getattr(config, part)
     return config
 
 

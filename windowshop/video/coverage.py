@@ -24,6 +24,15 @@ def azimuths_about(points: np.ndarray, centre: np.ndarray, up: np.ndarray,
     return np.degrees(np.arctan2(offsets @ side, offsets @ reference)) % 360.0
 
 
+def gaps_between(azimuths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted azimuths (N,) in [0, 360), the empty gap after each (N,)), the last one wrapping
+    round to the first."""
+    a = np.sort(np.asarray(azimuths, dtype=np.float64) % 360.0)
+    if a.size == 0:
+        raise ValueError("no azimuths to cover")
+    return a, np.diff(np.append(a, a[0] + 360.0))
+
+
 def covered_arc(azimuths: np.ndarray) -> tuple[float, float]:
     """(start, span) in degrees of the smallest arc holding every azimuth (N,).
 
@@ -31,10 +40,7 @@ def covered_arc(azimuths: np.ndarray) -> tuple[float, float]:
     `start` (in [0, 360)) counter-clockwise through `span` degrees; a single azimuth spans 0 and
     cameras all round span 360 less their widest spacing.
     """
-    a = np.sort(np.asarray(azimuths, dtype=np.float64) % 360.0)
-    if a.size == 0:
-        raise ValueError("no azimuths to cover")
-    gaps = np.diff(np.append(a, a[0] + 360.0))  # (N,): gap after each azimuth, the last wraps
+    a, gaps = gaps_between(azimuths)
     widest = int(np.argmax(gaps))
     start = a[(widest + 1) % a.size]
     return float(start), float(360.0 - gaps[widest])

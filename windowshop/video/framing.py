@@ -14,18 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from windowshop.scene.cameras import look_at
+from windowshop.scene.cameras import box_corners, look_at
 
 FILL = 0.8  # fraction of the frame the box's projection spans on its larger axis
 INSIDE = 0.98  # no corner comes nearer the frame's edge than this fraction of the half-frame
 MIN_DISTANCE = 3.0  # times the box's bounding radius: nearer, perspective swells its near end
 BISECTIONS = 60  # halvings of the distance interval: far below a pixel
-
-
-def box_corners(aabb) -> np.ndarray:
-    """The eight corners (8, 3) of the box `aabb` ((3,) min corner, (3,) max corner)."""
-    lo, hi = np.asarray(aabb, dtype=np.float64)
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
 
 def view_rotations(directions: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from windowshop.config import VideoOptions
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
+from windowshop.scene.cameras import box_corners
 from windowshop.scene.types import BACKGROUNDS, Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
 from windowshop.video.paths import TurntablePlan, plan_turntable, write_camera_path
@@ -60,7 +61,7 @@ class TurntableResult:
 def depth_range(cameras: list[Camera], bounds: Bounds) -> tuple[float, float]:
     """Fixed (near, far) for the depth video: the box's nearest and farthest points over all cameras."""
     lo, hi = np.asarray(bounds.aabb, dtype=np.float64)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(bounds.aabb)
     eyes = np.stack([c.center for c in cameras])  # (F, 3)
     outside = np.maximum(np.maximum(lo - eyes, eyes - hi), 0.0)  # (F, 3): 0 inside the box
     near = float(np.linalg.norm(outside, axis=1).min())

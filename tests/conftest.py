@@ -18,6 +18,17 @@ from service_helpers import free_port
 from shared_data import DATA
 
 
+def pytest_collection_modifyitems(config, items):
+    """Without ../shared/data, skip the tests of every module that reads it (imports DATA), with
+    the reason, instead of failing on missing files."""
+    if DATA.is_dir():
+        return
+    skip = pytest.mark.skip(reason=f"{DATA} is absent (the shared datasets beside the repository)")
+    for item in items:
+        if getattr(item.module, "DATA", None) == DATA:
+            item.add_marker(skip)
+
+
 @pytest.fixture(scope="session")
 def shared_data():
     """The shared datasets' folder; tests that need it skip where it is absent."""

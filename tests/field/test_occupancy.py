@@ -85,32 +85,37 @@ def test_set_from_vertices_marks_cells_by_their_densest_corner():
 
 
 @needs_kernels
-def test_fused_render_march_equals_marching_then_compositing():
-    """The early-terminating render kernel against march_reference + trilinear + packed weights."""
+def test_fused_render_composite_equals_marching_then_compositing():
+    """The early-terminating one-pass render kernel against march_reference + trilinear + packed
+    weights + the features composited over the samples above the threshold."""
     from windowshop.field.grid import trilinear_reference
     from windowshop.render.packed import packed_weights, ray_sum
 
     torch.manual_seed(4)
     shape = (9, 6, 8)
     density = torch.randn(9 * 6 * 8) * 3
+    features = torch.randn(9 * 6 * 8, 5)
     occupancy = OccupancyGrid((8, 5, 7), BOX)
     occupancy.set_from_vertices(density.view(shape), -1.0)
     origins, directions = random_rays(300, seed=2)
     t_min, t_max = ray_box(origins, directions, BOX, 0.5, 6.0)
     step, shift, scale, threshold = 0.02, -1.0, 8.0, 1e-3
     inv_voxel = (torch.tensor(shape) - 1) / (BOX[1] - BOX[0])
-    t, weight, ray, counts, opacity, depth = kernels.render_march(
-        origins, directions, t_min, t_max, step, occupancy.kernel_grid(), density, shape,
-        inv_voxel, shift, scale, threshold)
+    composited, counts, opacity, depth = kernels.render_composite(
+        origins, directions, t_min, t_max, step, occupancy.kernel_grid(), density, features,
+        shape, inv_voxel, shift, scale, threshold)
     ref = march_reference(origins, directions, t_min, t_max, torch.full((300,), 0.5), step,
                           occupancy.occupied, BOX[0].contiguous(), occupancy.inv_cell)
     points = origins[ref.ray] + ref.t[:, None] * directions[ref.ray]
-    raw = trilinear_reference(density[:, None], shape, (points - BOX[0]) * inv_voxel)[:, 0]
+    grid_points = (points - BOX[0]) * inv_voxel
+    raw = trilinear_reference(density[:, None], shape, grid_points)[:, 0]
     w = packed_weights(F.softplus(raw + shift) * scale, step, ref.ray, ref.counts)
     keep = w >= threshold
-    assert len(t) > 500 and 0.0 < float((opacity > 0.99).float().mean()) < 1.0
-    assert torch.equal(ray, ref.ray[keep]) and torch.allclose(t, ref.t[keep])
-    torch.testing.assert_close(weight, w[keep], rtol=1e-4, atol=1e-5)
+    expected = ray_sum(w[keep, None] * trilinear_reference(features, shape, grid_points[keep]),
+                       ref.ray[keep], 300)
+    assert int(counts.sum()) > 500 and 0.0 < float((opacity > 0.99).float().mean()) < 1.0
+    assert torch.equal(counts, torch.bincount(ref.ray[keep], minlength=300))
+    torch.testing.assert_close(composited, expected, rtol=1e-4, atol=1e-4)
     # terminated rays lose at most `threshold` of their opacity
     assert (ray_sum(w, ref.ray, 300) - opacity).abs().max() <= threshold + 1e-5
     assert (ray_sum(w * ref.t, ref.ray, 300) - depth).abs().max() <= 6.0 * threshold + 1e-4

@@ -126,6 +126,22 @@ def test_resume_continues_from_the_saved_step(tmp_path):
     assert after["optimizer_state"]["state"][0]["step"] == 5  # Adam's moments carried over
 
 
+def test_final_checkpoint_without_the_optimizer_still_renders_and_resumes(tmp_path):
+    """The video pipeline's runs drop Adam's state at the end: smaller, and still a whole run."""
+    scene = toy_scene()
+    config = FitConfig(iters=3, batch_rays=16, final_optimizer=False)
+    fit(scene, "nerf", TINY, config, tmp_path, "cpu", show_progress=False)
+    state = load_checkpoint(tmp_path)
+    assert state["optimizer_state"] is None and state["step"] == 3
+    run = load_run(tmp_path)
+    assert render_camera(run.model, scene.views[0].camera).rgb.shape == (12, 12, 3)
+    fit(scene, "nerf", TINY, dataclasses.replace(config, iters=5, final_optimizer=True), tmp_path,
+        "cpu", resume=tmp_path, show_progress=False)
+    after = load_checkpoint(tmp_path)
+    assert after["step"] == 5
+    assert after["optimizer_state"]["state"][0]["step"] == 2  # Adam started afresh at step 3
+
+
 def test_chunked_rendering_matches_one_pass():
     torch.manual_seed(0)
     from windowshop.field.nerf import NerfModel

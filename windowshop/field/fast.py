@@ -145,23 +145,33 @@ class FastModel(RadianceModel):
     # --- rendering ------------------------------------------------------------------------------
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
                     background: torch.Tensor) -> RenderOutput:
-        n_rays = origins.shape[0]
         aux = {}
         if self.training or not kernels.available(origins.device):
-            t, weights, ray, opacity, depth, count = self._march_and_weigh(origins, directions, aux)
+            features, opacity, depth, count = self._composite_features(origins, directions, aux)
         else:
-            t, weights, ray, opacity, depth, count = self._march_and_weigh_fused(origins, directions)
-        # colour only where it shows: after termination or in near-empty space it cannot matter.
+            features, opacity, depth, count = self._composite_features_fused(origins, directions)
         # Each ray's features are composited, then decoded once (deferred shading).
+        threshold = self.config.weight_threshold if self.training else self.config.render_threshold
+        mean = features / opacity.detach().clamp(min=threshold)[:, None]
+        color = opacity[:, None] * self.decode(mean, directions) + (1.0 - opacity)[:, None] * background
+        return RenderOutput(rgb=color, depth=depth, opacity=opacity, aux=aux, num_samples=count)
+
+    def _composite_features(self, origins: torch.Tensor, directions: torch.Tensor, aux: dict):
+        """Features (R, C) composited over every occupied sample (jittered when training), with
+        opacity (R,), depth (R,) and the number of samples marched.
+
+        Colour is read only where it shows: samples under the weight threshold (after
+        termination, or in near-empty space) add no features.
+        """
+        n_rays = origins.shape[0]
+        t, weights, ray, opacity, depth, count = self._march_and_weigh(origins, directions, aux)
         threshold = self.config.weight_threshold if self.training else self.config.render_threshold
         keep = (weights.detach() >= threshold).nonzero()[:, 0]  # still sorted by ray
         kept_ray = ray.index_select(0, keep)
         features = self.feature_grid.composite(origins, directions, t.index_select(0, keep),
                                                weights.index_select(0, keep), kept_ray,
                                                torch.bincount(kept_ray, minlength=n_rays))
-        mean = features / opacity.detach().clamp(min=threshold)[:, None]
-        color = opacity[:, None] * self.decode(mean, directions) + (1.0 - opacity)[:, None] * background
-        return RenderOutput(rgb=color, depth=depth, opacity=opacity, aux=aux, num_samples=count)
+        return features, opacity, depth, count
 
     def _march_and_weigh(self, origins: torch.Tensor, directions: torch.Tensor, aux: dict):
         """Every occupied sample (jittered when training) and its compositing weight.
@@ -196,16 +206,17 @@ class FastModel(RadianceModel):
         return here, torch.mean((there - here[None]) ** 2)
 
     @torch.no_grad()
-    def _march_and_weigh_fused(self, origins: torch.Tensor, directions: torch.Tensor):
-        """As `_march_and_weigh` without jitter, in one kernel that stops each ray once its
-        transmittance is below `render_threshold` and returns only the samples above it."""
+    def _composite_features_fused(self, origins: torch.Tensor, directions: torch.Tensor):
+        """As `_composite_features` without jitter, in one kernel that stops each ray once its
+        transmittance is below `render_threshold` and composites the samples above it as it goes."""
         occupancy, density = self.occupancy, self.density_grid
         t_min, t_max = ray_box(origins, directions, occupancy.aabb, self.bounds.near, self.bounds.far)
-        t, weights, ray, counts, opacity, depth = kernels.render_march(
+        features, counts, opacity, depth = kernels.render_composite(
             origins.contiguous(), directions.contiguous(), t_min, t_max, self.step_length,
-            occupancy.kernel_grid(), density.values.detach().view(-1), density.shape,
-            density.mapping()[1], self.shift, self.density_scale, self.config.render_threshold)
-        return t, weights, ray, opacity, depth, len(t)
+            occupancy.kernel_grid(), density.values.detach().view(-1),
+            self.feature_grid.values.detach(), density.shape, density.mapping()[1], self.shift,
+            self.density_scale, self.config.render_threshold)
+        return features, opacity, depth, int(counts.sum())
 
     # --- training: primitives the schedule (fit/schedule.py) calls ------------------------------
     def make_optimizer(self) -> torch.optim.Optimizer:

@@ -205,13 +205,14 @@ class DenseGrid(nn.Module):
         volume = F.interpolate(volume, size=tuple(shape), mode="trilinear", align_corners=True)
         return volume[0].reshape(table.shape[1], -1).T.contiguous()
 
-    def _set(self, shape: tuple[int, int, int], values: torch.Tensor) -> None:
+    def _set(self, shape: tuple[int, int, int], values: torch.Tensor, in_graph: bool = True) -> None:
         self.shape = shape
         self.size.copy_(torch.tensor(shape))
         # Keep the Parameter object (the optimizer holds it). While a graph of the old shape is
         # alive, autograd keeps a gradient accumulator of the old shape, and swapping `.data` only
-        # drops it on a change of dtype: so pass through float64 once.
-        self.values.data = values.double()
+        # drops it on a change of dtype: so pass through float64 once (not needed when loading).
+        if in_graph:
+            self.values.data = values.double()
         self.values.data = values.contiguous()
         self.values.grad = None
 
@@ -220,5 +221,5 @@ class DenseGrid(nn.Module):
         if size is not None and tuple(size.tolist()) != self.shape:
             shape = tuple(int(s) for s in size.tolist())
             self._set(shape, torch.empty(shape[0] * shape[1] * shape[2], self.values.shape[1],
-                                         device=self.values.device))
+                                         device=self.values.device), in_graph=False)
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

@@ -242,48 +242,53 @@ void adam_rows(float *param, float *exp_avg, float *exp_avg_sq, i64 C, const i64
     }
 }
 
-/* Render-time marching with early termination, in two passes (count, then fill) that visit the
- * same samples: each occupied sample's density is interpolated from the one-channel grid
- * `density` (X, Y, Z) as softplus(raw + shift) * scale (grid units: g = (x - lo) * inv_voxel),
- * transmittance T is accumulated, and the ray stops once T < threshold, after which no sample can
- * weigh more. Samples with weight w = T (1 - exp(-sigma step)) >= threshold are emitted. */
+/* Render-time marching with early termination and compositing, in one pass: each occupied
+ * sample's density is interpolated from the one-channel grid `density` (X, Y, Z) as
+ * softplus(raw + shift) * scale (grid units: g = (x - lo) * inv_voxel), transmittance T is
+ * accumulated, and the ray stops once T < threshold, after which no sample can weigh more. Samples
+ * with weight w = T (1 - exp(-sigma step)) >= threshold add w times their interpolated features
+ * (`features` (X, Y, Z, C), the same lattice as `density`, so both share the corner weights) to
+ * the ray's composited features: the samples themselves are never stored. */
 typedef struct {
     const float *origins, *dirs, *t_min, *t_max;
     i64 R;
     float step;
     const Occupancy *grid;
-    const float *density;
-    i64 X, Y, Z;
+    const float *density, *features;
+    i64 X, Y, Z, C;
     const float *inv_voxel;
     float shift, scale, threshold;
 } RenderMarch;
 
 static inline float softplus(float x) { return x > 20.0f ? x : log1pf(expf(x)); }
 
-/* March ray r; with t_out == NULL only count the emitted samples. Writes opacity and depth. */
-static i64 render_ray(const RenderMarch *m, i64 r, float *t_out, float *w_out, i64 *ray_out,
-                      float *opacity, float *depth) {
+/* March ray r: composited features out (C,), opacity, depth; returns the samples composited. */
+static i64 render_ray(const RenderMarch *m, i64 r, float *out, float *opacity, float *depth) {
     const float *o = m->origins + 3 * r, *d = m->dirs + 3 * r;
+    const i64 C = m->C;
     float trans = 1.0f, acc_depth = 0.0f;
     i64 n = 0;
+    for (i64 ch = 0; ch < C; ch++) out[ch] = 0.0f;
     for (i64 k = 0;;) {
         float t = sample_t(m->t_min[r], k, 0.5f, m->step);
         if (!(t < m->t_max[r]) || trans < m->threshold) break;
         int hit;
         k = visit(m->grid, o, d, t, m->t_min[r], 0.5f, m->step, k, &hit);
         if (!hit) continue;
-        float g[3];
+        float g[3], w[8];
+        i64 off[8];
         for (int a = 0; a < 3; a++) g[a] = (o[a] + t * d[a] - m->grid->lo[a]) * m->inv_voxel[a];
-        float raw;
-        interp(m->density, m->X, m->Y, m->Z, 1, g, &raw);
+        i64 base = corners(g, m->X, m->Y, m->Z, off, w);
+        float raw = 0.0f;
+        for (int c = 0; c < 8; c++) raw += w[c] * m->density[base + off[c]];
         float alpha = 1.0f - expf(-softplus(raw + m->shift) * m->scale * m->step);
         float weight = trans * alpha;
         acc_depth += weight * t;
         if (weight >= m->threshold) {
-            if (t_out) {
-                t_out[n] = t;
-                w_out[n] = weight;
-                ray_out[n] = r;
+            for (int c = 0; c < 8; c++) {
+                const float *v = m->features + (base + off[c]) * C;
+                float wc = weight * w[c];
+                for (i64 ch = 0; ch < C; ch++) out[ch] += wc * v[ch];
             }
             n++;
         }
@@ -294,21 +299,10 @@ static i64 render_ray(const RenderMarch *m, i64 r, float *t_out, float *w_out, i
     return n;
 }
 
-void render_march_count(const RenderMarch *m, i64 *counts) {
+void render_composite(const RenderMarch *m, float *out, float *opacity, float *depth, i64 *counts) {
 #pragma omp parallel for schedule(dynamic, 64)
-    for (i64 r = 0; r < m->R; r++) {
-        float opacity, depth;
-        counts[r] = render_ray(m, r, NULL, NULL, NULL, &opacity, &depth);
-    }
-}
-
-void render_march_fill(const RenderMarch *m, const i64 *starts, float *t_out, float *w_out,
-                       i64 *ray_out, float *opacity, float *depth) {
-#pragma omp parallel for schedule(dynamic, 64)
-    for (i64 r = 0; r < m->R; r++) {
-        i64 s = starts[r];
-        render_ray(m, r, t_out + s, w_out + s, ray_out + s, opacity + r, depth + r);
-    }
+    for (i64 r = 0; r < m->R; r++)
+        counts[r] = render_ray(m, r, out + r * m->C, opacity + r, depth + r);
 }
 
 /* Grid units of sample i of packed ray samples: origins[ray[i]] + t[i] * dirs[ray[i]]. */

@@ -42,8 +42,7 @@ _SIGNATURES = {
     "composite_rays_forward": [_P, _I, _I, _I, _I, _P, _P, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P],
     "composite_rays_backward": [_I, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _P,
                                 _P, _P],
-    "render_march_count": [_P, _P],
-    "render_march_fill": [_P, _P, _P, _P, _P, _P, _P],
+    "render_composite": [_P, _P, _P, _P, _P],
 }
 
 
@@ -55,12 +54,12 @@ class _Occupancy(ctypes.Structure):
 
 
 class _RenderMarch(ctypes.Structure):
-    """kernels.c's RenderMarch: the arguments of render_march_count/fill."""
+    """kernels.c's RenderMarch: the arguments of render_composite."""
 
     _fields_ = [("origins", _P), ("dirs", _P), ("t_min", _P), ("t_max", _P), ("R", _I),
-                ("step", _F), ("grid", ctypes.POINTER(_Occupancy)), ("density", _P), ("X", _I),
-                ("Y", _I), ("Z", _I), ("inv_voxel", _P), ("shift", _F), ("scale", _F),
-                ("threshold", _F)]
+                ("step", _F), ("grid", ctypes.POINTER(_Occupancy)), ("density", _P),
+                ("features", _P), ("X", _I), ("Y", _I), ("Z", _I), ("C", _I), ("inv_voxel", _P),
+                ("shift", _F), ("scale", _F), ("threshold", _F)]
 
 
 BLOCK = 4  # kernels.c's BLOCK: cells per side of a coarse occupancy block
@@ -277,31 +276,25 @@ def adam_rows(param: torch.Tensor, exp_avg: torch.Tensor, exp_avg_sq: torch.Tens
 
 
 @_profiled
-def render_march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
-                 t_max: torch.Tensor, step: float, grid: tuple, density: torch.Tensor,
-                 shape: tuple[int, int, int], inv_voxel: torch.Tensor, shift: float, scale: float,
-                 threshold: float) -> tuple[torch.Tensor, ...]:
-    """March rays (R, 3) at offsets 0.5 with early termination (see kernels.c render_ray).
+def render_composite(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
+                     t_max: torch.Tensor, step: float, grid: tuple, density: torch.Tensor,
+                     features: torch.Tensor, shape: tuple[int, int, int], inv_voxel: torch.Tensor,
+                     shift: float, scale: float, threshold: float) -> tuple[torch.Tensor, ...]:
+    """March rays (R, 3) at offsets 0.5 with early termination and composite their features in
+    one pass (see kernels.c render_ray).
 
-    `grid` is the occupancy (see _occupancy); `density` (X*Y*Z,) the raw one-channel grid of
-    `shape` over the same box, points mapping to its grid units by (x - lo) * inv_voxel. Returns
-    the samples of weight >= threshold as t (K,), weight (K,), ray (K,) int64, counts (R,) int64,
-    and per ray the opacity (R,) and depth (R,) of all samples marched.
+    `grid` is the occupancy (see _occupancy); `density` (X*Y*Z,) the raw one-channel grid and
+    `features` (X*Y*Z, C) the feature grid, both of `shape` over the same box, points mapping to
+    grid units by (x - lo) * inv_voxel. Returns per ray the sum (R, C) of weight times features
+    over its samples of weight >= threshold, their number (R,) int64, and the opacity (R,) and
+    depth (R,) of all samples marched.
     """
-    lib = library()
-    r = origins.shape[0]
+    r, c = origins.shape[0], features.shape[1]
     occupancy = _occupancy(grid)
     args = _RenderMarch(_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), r, step,
-                        ctypes.pointer(occupancy), _ptr(density), *shape, _ptr(inv_voxel), shift,
-                        scale, threshold)
+                        ctypes.pointer(occupancy), _ptr(density), _ptr(features), *shape, c,
+                        _ptr(inv_voxel), shift, scale, threshold)
+    out, opacity, depth = torch.empty(r, c), torch.empty(r), torch.empty(r)
     counts = torch.empty(r, dtype=torch.int64)
-    lib.render_march_count(ctypes.byref(args), _ptr(counts))
-    ends = torch.cumsum(counts, 0)
-    starts = (ends - counts).contiguous()
-    total = int(ends[-1]) if r else 0
-    t, weight = torch.empty(total), torch.empty(total)
-    ray = torch.empty(total, dtype=torch.int64)
-    opacity, depth = torch.empty(r), torch.empty(r)
-    lib.render_march_fill(ctypes.byref(args), _ptr(starts), _ptr(t), _ptr(weight), _ptr(ray),
-                          _ptr(opacity), _ptr(depth))
-    return t, weight, ray, counts, opacity, depth
+    library().render_composite(ctypes.byref(args), _ptr(out), _ptr(opacity), _ptr(depth), _ptr(counts))
+    return out, counts, opacity, depth

@@ -82,14 +82,15 @@ def write_config(run_dir: Path, model_name: str, model_config: Any, fit_config: 
     (run_dir / CONFIG).write_text(json.dumps(record, indent=2) + "\n")
 
 
-def save_checkpoint(run_dir: Path, model: RadianceModel, optimizer: torch.optim.Optimizer,
+def save_checkpoint(run_dir: Path, model: RadianceModel, optimizer: torch.optim.Optimizer | None,
                     scene: dict, fit_config: FitConfig, step: int, elapsed: float) -> Path:
-    """Write `checkpoint.pt` atomically (a crash mid-write leaves the previous one intact)."""
+    """Write `checkpoint.pt` atomically (a crash mid-write leaves the previous one intact);
+    without `optimizer`, its state is stored as None."""
     state = {"format": FORMAT, "model_name": model.name,
              "model_config": dataclasses.asdict(model.config),
              "bounds": dataclasses.asdict(model.bounds), "scene": scene,
              "fit_config": dataclasses.asdict(fit_config),
-             "model_state": model.state_dict(), "optimizer_state": optimizer.state_dict(),
+             "model_state": model.state_dict(), "optimizer_state": None if optimizer is None else optimizer.state_dict(),
              "step": int(step), "elapsed_seconds": float(elapsed)}
     path = run_dir / CHECKPOINT
     tmp = path.with_suffix(".tmp")
@@ -114,7 +115,8 @@ def load_checkpoint(run_dir: str | Path) -> dict:
     path = Path(run_dir) / CHECKPOINT
     if not path.is_file():
         raise UserError(f"{path} not found: give a run folder written by `windowshop fit --out`")
-    state = torch.load(path, map_location="cpu", weights_only=True)
+    # mapped, not read: rendering never touches the optimizer's state (two thirds of the file)
+    state = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     if state.get("format") != FORMAT:
         raise UserError(f"{path} is not a windowshop checkpoint ({FORMAT})")
     return state

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import time
 from collections.abc import Sequence
@@ -38,6 +39,8 @@ from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
 from windowshop.scene.hull import carve_mask
 from windowshop.scene.types import BACKGROUNDS, Camera, Scene
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -76,8 +79,9 @@ class TrainingRun:
         if self.losses is None:
             self.losses = loss_terms(self.model.config)
 
-    def checkpoint(self) -> None:
-        path = save_checkpoint(self.out_dir, self.model, self.optimizer, self.record, self.config,
+    def checkpoint(self, final: bool = False) -> None:
+        optimizer = None if final and not self.config.final_optimizer else self.optimizer
+        path = save_checkpoint(self.out_dir, self.model, optimizer, self.record, self.config,
                                self.progress.step, self.progress.elapsed)
         self.callbacks.checkpointed(path)
 
@@ -133,7 +137,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     except KeyboardInterrupt:
         run.checkpoint()
         raise UserError(f"interrupted at step {progress.step}; carry on with --resume {out_dir}")
-    run.checkpoint()
+    run.checkpoint(final=True)
     results = evaluate_views(model, held_out_views(scene), scene.background,
                              fit_config.eval_chunk, out_dir / EVAL_DIR)
     metrics = {**results, "model": model_name, "train_seconds": progress.elapsed,
@@ -148,7 +152,10 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     if state["model_name"] != model.name:
         raise UserError(f"{run_dir} holds a {state['model_name']!r} model, not {model.name!r}")
     model.load_state_dict(state["model_state"])
-    optimizer.load_state_dict(state["optimizer_state"])
+    if state["optimizer_state"] is not None:
+        optimizer.load_state_dict(state["optimizer_state"])
+    else:
+        log.info("%s was saved without its optimizer state: Adam starts afresh", run_dir)
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
 
 

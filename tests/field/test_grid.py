@@ -92,8 +92,9 @@ def test_fused_kernels_equal_the_reference(channels):
     assert accum.abs().sum() == 0 and touched.sum() == 0
 
 
-def test_resize_keeps_affine_data_and_a_checkpoint_restores_its_shape():
-    grid = DenseGrid(SHAPE, 1, BOX, fused=False)
+@pytest.mark.parametrize("fused", [False, True])  # F.interpolate, or the kernel at the vertices
+def test_resize_keeps_affine_data_and_a_checkpoint_restores_its_shape(fused):
+    grid = DenseGrid(SHAPE, 1, BOX, fused=fused)
     with torch.no_grad():
         grid.values.copy_(affine(lattice(SHAPE, torch.float32)))
     param = grid.values

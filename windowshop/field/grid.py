@@ -200,8 +200,17 @@ class DenseGrid(nn.Module):
         self._set(shape, self.resample(self.values, shape))
 
     def resample(self, table: torch.Tensor, shape: tuple[int, int, int]) -> torch.Tensor:
-        """Any per-vertex `table` (X*Y*Z, C) of this lattice resampled to `shape` (trilinear)."""
-        volume = table.detach().T.reshape(1, -1, *self.shape)
+        """Any per-vertex `table` (X*Y*Z, C) of this lattice resampled to `shape` (trilinear).
+
+        The fused kernel reads the table in its own (vertex, channel) layout at the new vertices
+        (3-4x faster than interpolate's two transposes: growth happens inside the time budget).
+        """
+        table = table.detach()
+        if self._fused_for(table):
+            axes = [torch.linspace(0.0, old - 1, new) for old, new in zip(self.shape, shape)]
+            points = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
+            return kernels.trilinear_forward(table.contiguous(), self.shape, points)
+        volume = table.T.reshape(1, -1, *self.shape)
         volume = F.interpolate(volume, size=tuple(shape), mode="trilinear", align_corners=True)
         return volume[0].reshape(table.shape[1], -1).T.contiguous()
 
@@ -210,9 +219,10 @@ class DenseGrid(nn.Module):
         self.size.copy_(torch.tensor(shape))
         # Keep the Parameter object (the optimizer holds it). While a graph of the old shape is
         # alive, autograd keeps a gradient accumulator of the old shape, and swapping `.data` only
-        # drops it on a change of dtype: so pass through float64 once (not needed when loading).
+        # drops it on a change of dtype: so pass through an empty float64 tensor once (not
+        # needed when loading).
         if in_graph:
-            self.values.data = values.double()
+            self.values.data = values.new_empty(0, dtype=torch.float64)
         self.values.data = values.contiguous()
         self.values.grad = None
 

@@ -173,6 +173,9 @@ class PipelineConfig:
                                                              checkpoint_every=10**9,
                                                              final_optimizer=False))
     render: VideoOptions = field(default_factory=lambda: VideoOptions(frames=60))
+    # When prepare runs long, training is cut so that the video is out in about `deadline`.
+    deadline: float | None = 60.0  # seconds for the whole job (none: train for all of fit.seconds)
+    min_fit_seconds: float = 15.0  # ... but training is never cut to less than this
 
 
 @dataclass(frozen=True)

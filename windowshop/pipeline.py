@@ -14,16 +14,20 @@ import json
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import torch
 
-from windowshop.config import PipelineConfig
+from windowshop.config import FitConfig, PipelineConfig
 from windowshop.errors import UserError
 from windowshop.photos.progress import StageCallback
 
 MARKER = "video.json"  # the summary a work folder of make_video holds (and may be replaced by)
+# What the deadline sets aside after training, measured on a 2-core CPU (bench/bench_real.py):
+# the fit's own work around its steps (carving, the held-out photos, the checkpoint) ...
+FIT_OVERHEAD_SECONDS = 4.0
+RENDER_RAYS_PER_SECOND = 5e5  # ... and the turntable, rendered and encoded at this many pixels/s
 
 
 @dataclass
@@ -59,6 +63,18 @@ def _work_dir(work: Path) -> Path:
     work.mkdir(parents=True, exist_ok=True)
     (work / MARKER).write_text("{}")
     return work
+
+
+def fit_within_deadline(config: PipelineConfig, spent: float) -> FitConfig:
+    """The fit's settings with its time budget cut so that a job which has `spent` seconds
+    before training still ends by `config.deadline` (estimating the rest), to no less than
+    `config.min_fit_seconds`; unchanged without a deadline or for a budget in steps."""
+    fit, render = config.fit, config.render
+    if config.deadline is None or fit.seconds is None:
+        return fit
+    after = FIT_OVERHEAD_SECONDS + render.frames * render.width * render.height / RENDER_RAYS_PER_SECOND
+    left = config.deadline - spent - after
+    return replace(fit, seconds=max(config.min_fit_seconds, min(fit.seconds, left)))
 
 
 def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig = PipelineConfig(),
@@ -106,9 +122,14 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
 
     start = time.perf_counter()
     report("fit", 0.0)
+    fit_config = fit_within_deadline(config, sum(seconds.values()))
+    if show and fit_config.seconds != config.fit.seconds:
+        print(f"fit: training for {fit_config.seconds:.0f} s instead of {config.fit.seconds:.0f} s to "
+              f"be done in about {config.deadline:.0f} s (prepare took {seconds['prepare']:.0f} s; "
+              "--deadline none trains for the whole budget)", file=sys.stderr)
     scene = load_scene(scene_dir, config.scene)
     model = model_config(config.model, config.preset, **config.model_settings)
-    metrics = fit(scene, config.model, model, config.fit, work / "run", device, show_progress=show,
+    metrics = fit(scene, config.model, model, fit_config, work / "run", device, show_progress=show,
                   callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
 

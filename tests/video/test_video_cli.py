@@ -12,7 +12,8 @@ from windowshop.errors import UserError
 from windowshop.config import PipelineConfig
 from windowshop.fit.checkpoint import load_run
 from windowshop.overrides import apply_overrides
-from windowshop.pipeline import is_posed_scene, make_video
+from windowshop.pipeline import (FIT_OVERHEAD_SECONDS, RENDER_RAYS_PER_SECOND, fit_within_deadline,
+                                 is_posed_scene, make_video)
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
 from windowshop.video.encode import probe_video
@@ -28,6 +29,17 @@ def posed(tmp_path_factory):
     folder = tmp_path_factory.mktemp("posed")
     write_transforms(synthetic_scene(n_train=8, n_test=1, size=32), folder)
     return folder
+
+
+def test_a_long_prepare_shortens_training_to_meet_the_deadline():
+    config = PipelineConfig()  # 30 s of training, a 60 s deadline, 60 frames of 256x256
+    after = FIT_OVERHEAD_SECONDS + 60 * 256 * 256 / RENDER_RAYS_PER_SECOND
+    assert fit_within_deadline(config, 10.0).seconds == 30.0  # time enough: the whole budget
+    assert fit_within_deadline(config, 32.0).seconds == pytest.approx(60.0 - 32.0 - after)
+    assert fit_within_deadline(config, 55.0).seconds == config.min_fit_seconds
+    assert fit_within_deadline(apply_overrides(config, {"deadline": None}), 55.0).seconds == 30.0
+    steps = apply_overrides(config, {"fit.iters": 100})  # a budget in steps is the user's call
+    assert fit_within_deadline(steps, 55.0) == steps.fit
 
 
 def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):

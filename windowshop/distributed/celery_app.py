@@ -29,7 +29,8 @@ class ClusterSettings(BaseSettings):
     visibility_timeout: float = 3600.0  # seconds before an unacknowledged task is redelivered
     restore_interval: float = 10.0  # seconds between the workers' sweeps for such tasks
     heartbeat_seconds: float = 5.0  # how often a running try tells the service it is alive
-    stale_seconds: float = 30.0  # a try silent this long is dead: its job may be taken over
+    stale_seconds: float = 30.0  # a try silent this long is dead: the service sends its job again
+    silence_check_seconds: float = 5.0  # how often the service looks for silent tries and lost tasks
     queue_check_seconds: float = 30.0  # how long the service trusts its list of gpu workers
 
 

@@ -205,18 +205,22 @@ def _check_free_space(settings: ServiceSettings) -> None:
     """507 while the data folder's disk has less than `min_free_bytes` free (running jobs need it)."""
     free = shutil.disk_usage(settings.jobs_dir).free
     if free < settings.min_free_bytes:
-        raise ApiError(507, "disk_full", f"the service is short of disk space ({free // 2**20} MiB "
-                       f"free, {settings.min_free_bytes // 2**20} MiB kept for running jobs); try "
-                       "again later", headers={"Retry-After": "600"})
+        raise ApiError(507, "disk_full", f"the service is short of disk space ({_mib(free)} free, "
+                       f"{_mib(settings.min_free_bytes)} kept for running jobs); try again later",
+                       headers={"Retry-After": "600"})
 
 
 def _check_stored_size(folder: Path, settings: ServiceSettings) -> None:
     """413 when the checked upload takes more than `max_job_bytes`; 507 when it left too little free."""
     size = folder_bytes(folder)
     if size > settings.max_job_bytes:
-        raise ApiError(413, "job_too_large", f"the upload takes {size // 2**20} MiB once unpacked; "
-                       f"one job may store at most {settings.max_job_bytes // 2**20} MiB")
+        raise ApiError(413, "job_too_large", f"the upload takes {_mib(size)} once unpacked; one "
+                       f"job may store at most {_mib(settings.max_job_bytes)}")
     _check_free_space(settings)
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.1f} MiB"
 
 
 async def _receive_upload(request: Request, folder: Path, settings: ServiceSettings):

@@ -73,6 +73,8 @@ class Sweeper:
                     due[i] = time.monotonic() + period
                     try:
                         sweep()
-                    except Exception:  # noqa: BLE001 - a sweep must never stop the others
-                        log.exception("sweep %s failed; tried again in %.0f s", sweep, period)
+                    except Exception as err:  # noqa: BLE001 - a sweep must never stop the others
+                        first_line = str(err).splitlines()[0] if str(err) else ""
+                        log.warning("a sweep failed (%s: %s); tried again in %.0f s",
+                                    type(err).__name__, first_line, period)
             self._stop.wait(max(0.0, min(due) - time.monotonic()))

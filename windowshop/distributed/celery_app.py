@@ -3,9 +3,11 @@
 Trusted-queue settings: a task is acknowledged only once it has finished (`acks_late`), and put
 back when the process running it dies (`reject_on_worker_lost`); a worker that vanishes altogether
 (a machine lost, SIGKILL) leaves its message unacknowledged in Redis, which hands it to another
-worker once `visibility_timeout` has passed. That timeout must exceed the longest job, or a live
-job is delivered twice (harmless: the store's compare-and-set lets only one try run, see store.py,
-but wasteful). Each worker takes one task at a time per process (prefetch 1).
+worker once `visibility_timeout` has passed. The service does not wait that long: its sweep sends
+the job again once the try's heartbeat has been silent `stale_seconds` (sweeps.py). The timeout
+must still exceed the longest job, or a live job is delivered twice (harmless: the store's
+compare-and-set lets only one try run, see store.py, but wasteful). Each worker takes one task at a
+time per process (prefetch 1).
 """
 
 from __future__ import annotations

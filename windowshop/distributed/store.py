@@ -8,7 +8,8 @@ without explicit locks; a delivery that lost the race changes nothing.
 
 A job runs in phases, each one Celery task: "prepare" (photos or a video -> a posed scene, on the
 `cpu` queue) then "train" (fit and render, on `gpu` when such workers exist). `attempts` counts the
-tries of the current phase; the MAX_ATTEMPTS-th failed try fails the job with its last error.
+tries of the current phase; a try failed by the user's input fails the job at once, and the
+MAX_ATTEMPTS-th try ended by a transient fault (or lost with its worker) fails it with its last error.
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 A small posed scene goes up through the page; once the job is done the video must play (its time
 advances) and dragging the spin viewer must change the frame. Screenshots of the result page on a
-desktop and on a phone-sized screen are kept in test-artifacts/.
+desktop and on a phone-sized screen are kept in test-artifacts/. The owner cancels a second job from
+the page, where the share link opened in another browser shows neither cancel nor delete.
 """
 
 from __future__ import annotations

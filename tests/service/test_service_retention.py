@@ -3,6 +3,7 @@ under the free-space floor and with 413 over one job's size cap, nothing saved l
 
 from __future__ import annotations
 
+import errno
 import os
 import threading
 import time
@@ -119,3 +120,15 @@ def test_an_upload_over_the_job_size_cap_is_refused(tmp_path):
     assert "at most 0.0 MiB" in refused(limited.post("/api/jobs", files=big), 413, "job_too_large")
     assert sorted(p.name for p in (tmp_path / "data" / "jobs").iterdir()) == [saved]
     assert (tmp_path / "data" / "jobs" / saved / "input").is_dir()
+
+
+def test_a_disk_that_fills_up_during_an_upload_refuses_it_alone(tmp_path, monkeypatch):
+    normal, _ = _two_clients(tmp_path)
+    saved = normal.post("/api/jobs", files=photos()).json()["id"]
+
+    def no_space(*_args):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("windowshop.service.routes.copy_limited", no_space)
+    assert "filled up" in refused(normal.post("/api/jobs", files=photos()), 507, "disk_full")
+    assert sorted(p.name for p in (tmp_path / "data" / "jobs").iterdir()) == [saved]

@@ -9,6 +9,7 @@ Whoever has the id may watch the job; only its owner may cancel or delete it: cr
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import re
@@ -189,8 +190,11 @@ async def create_job(request: Request) -> JobCreated:
     try:
         checked = await _receive_upload(request, folder, settings)
         await run_in_threadpool(_check_stored_size, folder, settings)
-    except BaseException:
+    except BaseException as err:
         shutil.rmtree(folder, ignore_errors=True)  # this upload only: saved jobs are untouched
+        if isinstance(err, OSError) and err.errno == errno.ENOSPC:
+            raise ApiError(507, "disk_full", "the service's disk filled up while the upload was "
+                           "saved; try again later", headers={"Retry-After": "600"}) from None
         raise
     job = await run_in_threadpool(store.create, job_id, checked.kind, checked.summary,
                                   settings.max_queued, owner_hash(token))

@@ -20,6 +20,7 @@ import threading
 import time
 import traceback
 from multiprocessing.process import BaseProcess
+from pathlib import Path
 from typing import Callable
 
 from windowshop.errors import UserError, failure_reason, is_transient
@@ -78,7 +79,8 @@ class Worker:
             log.info("job %s started (attempt %d)", job.id, job.attempts)
 
     def _reap(self) -> None:
-        """Forget finished processes; a process that died without ending its job fails the job."""
+        """Forget finished processes; a process that died without ending its job (killed, as by the
+        OOM killer) puts the job back in the queue, or fails it after MAX_ATTEMPTS tries."""
         for job_id, (process, token) in list(self.running.items()):
             if process.is_alive():
                 continue
@@ -150,7 +152,7 @@ def _job_main(job_fn: JobFunction, settings: ServiceSettings, job_id: str, token
         store.finish(job_id, token, DONE, frames=frames)
 
 
-def _write_error_log(path) -> None:
+def _write_error_log(path: Path) -> None:
     """The traceback beside the job, for its operator; skipped when the disk itself is full."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

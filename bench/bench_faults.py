@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -110,7 +111,10 @@ def main() -> None:
     for name in args.faults:
         for repeat in range(args.repeats):
             root = Path(tempfile.mkdtemp(prefix=f"windowshop-fault-{name}-"))
-            figures = FAULTS[name](root)
+            try:
+                figures = FAULTS[name](root)
+            finally:
+                shutil.rmtree(root, ignore_errors=True)
             print(json.dumps({"fault": name, "repeat": repeat, **figures,
                               "load_average": round(os.getloadavg()[0], 1)}), flush=True)
 

@@ -70,7 +70,7 @@ def create(url: str, data: bytes, barrier: threading.Barrier, out: list, i: int)
                        timeout=120)
         body = r.json()
         out[i] = {"status": r.status_code, "id": body.get("id"), "error": body.get("error"),
-                  "seconds": time.perf_counter() - start}
+                  "owner_token": body.get("owner_token"), "seconds": time.perf_counter() - start}
     except (httpx.HTTPError, ValueError) as err:  # no clear answer: counted as lost
         out[i] = {"status": None, "error": f"{type(err).__name__}: {err}",
                   "seconds": time.perf_counter() - start}
@@ -140,6 +140,7 @@ def run(url: str, data: bytes, args: argparse.Namespace) -> dict:
     prober.join()
 
     accepted = [r["id"] for r in results if r["status"] == 201]
+    tokens = {r["id"]: r["owner_token"] for r in results if r["status"] == 201}
     refused = [r for r in results if r["status"] and r["status"] != 201 and r["error"]]
     unclear = [r for r in results if r not in refused and r["status"] != 201]
     states = {}
@@ -147,7 +148,8 @@ def run(url: str, data: bytes, args: argparse.Namespace) -> dict:
         status = httpx.get(f"{url}/api/jobs/{job_id}", timeout=30)
         states[job_id] = status.json()["state"] if status.status_code == 200 else "LOST"
     for job_id in accepted:
-        httpx.delete(f"{url}/api/jobs/{job_id}", timeout=30)
+        httpx.delete(f"{url}/api/jobs/{job_id}", timeout=30,
+                     headers={"Authorization": f"Bearer {tokens[job_id]}"})
     return {
         "benchmark": "service_load", "clients": args.clients, "max_queued": args.max_queued,
         "upload_bytes": len(data), "accepted": len(accepted),

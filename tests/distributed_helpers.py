@@ -16,12 +16,12 @@ import httpx
 
 from service_helpers import FAST_JOB, free_port
 
-# Failure detection scaled down to seconds: a lost worker's task is redelivered after ~12 s.
+# Failure detection scaled down to seconds: a lost worker's job is sent again ~5 s after its last
+# heartbeat (by the service's sweep; Redis's visibility timeout keeps its default hour).
 CLUSTER_ENV = {
-    "WINDOWSHOP_VISIBILITY_TIMEOUT": "12",
-    "WINDOWSHOP_RESTORE_INTERVAL": "1",
     "WINDOWSHOP_HEARTBEAT_SECONDS": "1",
     "WINDOWSHOP_STALE_SECONDS": "5",
+    "WINDOWSHOP_SILENCE_CHECK_SECONDS": "1",
 }
 REDIS = shutil.which("redis-server")
 
@@ -46,25 +46,28 @@ def end(process: subprocess.Popen | None, sig: int = signal.SIGKILL) -> None:
 class Cluster:
     """A broker, a service and named workers, all under `root`."""
 
-    def __init__(self, root: Path):
-        self.root = root
-        self.env = {**os.environ, **FAST_JOB, **CLUSTER_ENV}
+    def __init__(self, root: Path, env: dict | None = None, db: str | None = None):
+        """`env`: the cluster's settings (default CLUSTER_ENV); `db`: the store's URL (--db)."""
+        self.root, self.db = root, db
+        self.env = {**os.environ, **FAST_JOB, **(CLUSTER_ENV if env is None else env)}
         self.redis_port, self.port = free_port(), free_port()
         self.broker = f"redis://127.0.0.1:{self.redis_port}/0"
         self.url = f"http://127.0.0.1:{self.port}"
         self.redis = self.service = None
         self.workers: dict[str, subprocess.Popen] = {}
+        self.owners: dict[str, dict] = {}  # job id -> the header its owner's requests carry
 
     def start_redis(self) -> None:
-        (self.root / "redis").mkdir()
+        (self.root / "redis").mkdir(exist_ok=True)
         self.redis = _session([REDIS, "--port", str(self.redis_port), "--bind", "127.0.0.1",
                                "--dir", str(self.root / "redis"), "--save", "", "--appendonly", "no"],
                               self.root / "redis.log", self.env)
 
     def start(self) -> "Cluster":
         self.start_redis()
+        db = ["--db", self.db] if self.db else []
         self.service = _session([sys.executable, "-m", "windowshop", "serve", "--broker", self.broker,
-                                 "--data", str(self.root / "data"), "--port", str(self.port)],
+                                 "--data", str(self.root / "data"), "--port", str(self.port), *db],
                                 self.root / "serve.log", self.env)
         self._wait(lambda: httpx.get(f"{self.url}/api/health", timeout=2).json()["ok"], "service")
         return self
@@ -105,17 +108,27 @@ class Cluster:
             response = httpx.post(f"{self.url}/api/jobs", files={"files": (zip_path.name, f)},
                                   timeout=60)
         assert response.status_code == 201, response.text
-        return response.json()["id"]
+        body = response.json()
+        self.owners[body["id"]] = {"Authorization": f"Bearer {body['owner_token']}"}
+        return body["id"]
+
+    def cancel(self, job_id: str) -> dict:
+        return httpx.post(f"{self.url}/api/jobs/{job_id}/cancel", headers=self.owners[job_id],
+                          timeout=10).json()
 
     def status(self, job_id: str) -> dict:
         return httpx.get(f"{self.url}/api/jobs/{job_id}", timeout=10).json()
 
     def wait_for(self, job_id: str, states, timeout: float = 180.0) -> dict:
+        """The job's status once in `states`; a service (or its database) briefly away is waited out."""
         deadline = time.monotonic() + timeout
         status = None
         while time.monotonic() < deadline:
-            status = self.status(job_id)
-            if status["state"] in states:
+            try:
+                status = self.status(job_id)
+            except (httpx.TransportError, ValueError):
+                status = None
+            if status and status.get("state") in states:
                 return status
             time.sleep(0.3)
         raise AssertionError(f"job {job_id} never reached {states}: {status}\n{self.logs()}")

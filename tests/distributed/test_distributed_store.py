@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from windowshop.distributed.celery_app import gpu_workers
-from windowshop.distributed.store import MAX_ATTEMPTS, PREPARE, TRAIN, ClusterStore
+from windowshop.distributed.store import MAX_ATTEMPTS, PREPARE, TRAIN, ClusterStore, jobs
 
 STALE = 5.0
 
@@ -66,6 +68,50 @@ def test_a_job_whose_workers_keep_dying_fails_at_the_next_delivery(store):
     assert store.claim(job, TRAIN, "t9", "w2", stale_seconds=0.0) == "skip"
     job_row = store.get(job)
     assert job_row.state == "failed" and "worker running it was lost" in job_row.error
+
+
+def test_a_users_error_fails_the_job_at_once_with_its_reason(store):
+    job = _job(store)
+    assert store.claim(job, TRAIN, "t1", "w1", STALE) == "run"
+    reason = "only 2 of 12 photos could be placed; take more photos with overlap"
+    assert store.fail_try(job, "t1", reason, transient=False) == "failed"
+    row = store.row(job)
+    assert (row["state"], row["error"], row["attempts"]) == ("failed", reason, 1)
+    assert store.claim(job, TRAIN, "t2", "w1", STALE) == "skip"
+
+
+def test_a_silent_try_is_put_back_in_the_queue_by_the_sweep(store):
+    silent, alive = _job(store, job_id="s" * 22), _job(store, job_id="a" * 22)
+    assert store.claim(silent, TRAIN, "t1", "w1", STALE) == "run"
+    assert store.claim(alive, TRAIN, "u1", "w2", STALE) == "run"
+    with store.engine.begin() as db:  # the first try's worker died a minute ago
+        db.execute(jobs.update().where(jobs.c.id == silent).values(heartbeat_at=time.time() - 60))
+    assert store.requeue_silent(stale_seconds=30) == [silent]
+    assert store.requeue_silent(stale_seconds=30) == []  # once: it is queued now
+    row = store.row(silent)
+    assert (row["state"], row["run_token"], row["attempts"]) == ("queued", None, 1)
+    assert "worker running it was lost" in row["error"]
+    assert not store.beat(silent, "t1") and not store.finish(silent, "t1", frames=8)  # too late
+    assert store.claim(silent, TRAIN, "t2", "w2", STALE) == "run"
+    assert store.get(alive).state == "training"  # its heartbeat is fresh
+
+
+def test_a_job_whose_tries_all_fall_silent_fails(store):
+    job = _job(store)
+    for attempt in range(MAX_ATTEMPTS):
+        assert store.claim(job, TRAIN, f"t{attempt}", "w1", STALE) == "run"
+        assert store.requeue_silent(stale_seconds=-1.0) == ([job] if attempt < MAX_ATTEMPTS - 1 else [])
+    row = store.row(job)
+    assert row["state"] == "failed" and "worker running it was lost" in row["error"]
+
+
+def test_unsent_jobs_are_listed_until_sent(store):
+    first, second = _job(store, job_id="a" * 22), _job(store, job_id="b" * 22)
+    assert store.queued() == [first, second] and store.queued(undispatched_only=True) == []
+    store.set_dispatched(second, False)  # the broker was away
+    assert store.queued(undispatched_only=True) == [second]
+    store.set_dispatched(second, True)
+    assert store.queued(undispatched_only=True) == []
 
 
 def test_prepare_hands_over_to_train_and_cancel_stops_both(store):

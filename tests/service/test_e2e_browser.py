@@ -2,7 +2,8 @@
 
 A small posed scene goes up through the page; once the job is done the video must play (its time
 advances) and dragging the spin viewer must change the frame. Screenshots of the result page on a
-desktop and on a phone-sized screen are kept in test-artifacts/.
+desktop and on a phone-sized screen are kept in test-artifacts/. The owner cancels a second job from
+the page, where the share link opened in another browser shows neither cancel nor delete.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import shutil
 import time
 from pathlib import Path
 
+import httpx
 import pytest
 
 from service_helpers import LiveService, posed_scene_zip
@@ -117,3 +119,26 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     assert width <= 390, "the page scrolls sideways on a phone"
     page.screenshot(path=str(ARTIFACTS / "e2e-phone.png"), full_page=True)
     phone.close()
+
+
+def test_the_owner_cancels_from_the_page_and_a_shared_link_cannot(service, browser, tmp_path):
+    scene = posed_scene_zip(tmp_path / "scene.zip")
+    owner = browser.new_context()
+    page = owner.new_page()
+    page.goto(service.url)
+    page.set_input_files("#pick", str(scene))
+    page.click("#send")
+    page.wait_for_url("**/jobs/*")
+    job_id = page.url.rsplit("/", 1)[1]
+    assert page.evaluate(f"localStorage.getItem('windowshop.owner.{job_id}')")  # the owner token
+
+    shared = browser.new_context().new_page()  # the share link in another browser: watch only
+    shared.goto(f"{service.url}/jobs/{job_id}")
+    shared.wait_for_selector("#job-state[data-state]")
+    assert shared.is_hidden("#cancel") and shared.is_hidden("#delete")
+
+    page.click("#cancel")  # shown to the owner while the job is queued or running
+    page.wait_for_selector("#job-state[data-state=cancelled]", timeout=30_000)
+    assert httpx.get(f"{service.url}/api/jobs/{job_id}").json()["state"] == "cancelled"
+    owner.close()
+    shared.context.close()

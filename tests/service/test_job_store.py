@@ -4,6 +4,7 @@ server, skipped where PostgreSQL is not installed)."""
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -20,7 +21,7 @@ class Subject:
     """A store, and the store's own ways to queue a job and to start a try of it."""
 
     store: JobStore
-    create: Callable[[str, int | None], object]  # (job id, max queued) -> Job | None
+    create: Callable[..., object]  # (job id, max queued, owner hash=None) -> Job | None
     start: Callable[[str], str]  # job id -> the try's run token
 
 
@@ -32,8 +33,8 @@ def _sqlite(tmp_path) -> Subject:
         assert claimed is not None and claimed.id == job_id
         return f"token-{job_id}"
 
-    return Subject(store, lambda job_id, most: store.create(job_id, "photos", "3 photos", most),
-                   start)
+    return Subject(store, lambda job_id, most, owner=None: store.create(job_id, "photos", "3 photos",
+                                                                        most, owner), start)
 
 
 def _cluster(url: str) -> Subject:
@@ -45,8 +46,8 @@ def _cluster(url: str) -> Subject:
         assert store.claim(job_id, PREPARE, f"token-{job_id}", "w1", stale_seconds=60) == "run"
         return f"token-{job_id}"
 
-    return Subject(store, lambda job_id, most: store.create(job_id, "photos", "3 photos", PREPARE,
-                                                            "key", most), start)
+    return Subject(store, lambda job_id, most, owner=None: store.create(
+        job_id, "photos", "3 photos", PREPARE, "key", most, owner), start)
 
 
 @pytest.fixture(params=["sqlite", "cluster-sqlite", "cluster-postgresql"])
@@ -104,3 +105,35 @@ def test_cancel_stops_reports_and_delete_forgets(subject):
     assert store.cancel("nope") is None
     assert store.delete("job-a") and store.get("job-a") is None
     assert not store.delete("job-a")
+
+
+def test_the_owner_hash_is_kept_and_ended_jobs_expire(subject):
+    store = subject.store
+    subject.create("job-b", None)
+    assert store.get("job-b").owner_hash is None
+    subject.start("job-b")  # running: never expired, however old
+    assert subject.create("job-a", None, "ab" * 32).owner_hash == "ab" * 32
+    ended = store.cancel("job-a").finished_at
+    assert store.expired(ended + 1) == ["job-a"]
+    assert store.expired(ended - 1) == []
+
+
+def _reopen_without_new_columns(store):
+    """Drop the columns added since the first release, then open the store again."""
+    if isinstance(store, SQLiteJobStore):
+        with sqlite3.connect(store.path) as db:
+            db.execute("ALTER TABLE jobs DROP COLUMN owner_hash")
+        return SQLiteJobStore(store.path)
+    with store.engine.begin() as db:
+        db.exec_driver_sql("ALTER TABLE jobs DROP COLUMN owner_hash")
+        db.exec_driver_sql("ALTER TABLE jobs DROP COLUMN dispatched_at")
+    url = store.engine.url.render_as_string(hide_password=False)
+    store.engine.dispose()
+    return ClusterStore(url)
+
+
+def test_a_table_from_before_owner_tokens_gains_the_column(subject):
+    subject.create("job-a", None)
+    store = _reopen_without_new_columns(subject.store)
+    assert store.get("job-a").owner_hash is None  # a job from before: no owner can be proven
+    assert subject.create("job-b", None, "cd" * 32).owner_hash == "cd" * 32

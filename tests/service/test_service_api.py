@@ -299,19 +299,25 @@ def test_results_wait_until_the_job_is_done(client):
         assert "queued" in refused(client.get(f"/api/jobs/{job_id}/{path}"), 409, "not_done")
 
 
+def owner(created) -> dict:
+    return {"Authorization": f"Bearer {created.json()['owner_token']}"}
+
+
 def test_cancel_a_queued_job(client):
-    job_id = client.post("/api/jobs", files=photos()).json()["id"]
-    r = client.post(f"/api/jobs/{job_id}/cancel")
+    created = client.post("/api/jobs", files=photos())
+    job_id = created.json()["id"]
+    r = client.post(f"/api/jobs/{job_id}/cancel", headers=owner(created))
     assert r.status_code == 200 and r.json()["state"] == "cancelled"
     assert client.get(f"/api/jobs/{job_id}").json()["state"] == "cancelled"
-    refused(client.post(f"/api/jobs/{job_id}/cancel"), 409, "finished")
+    refused(client.post(f"/api/jobs/{job_id}/cancel", headers=owner(created)), 409, "finished")
     assert SQLiteJobStore(client.settings.db_path).claim_next("token") is None  # the worker won't run it
 
 
 def test_delete_removes_the_job_and_its_files(client):
-    job_id = client.post("/api/jobs", files=photos()).json()["id"]
+    created = client.post("/api/jobs", files=photos())
+    job_id = created.json()["id"]
     assert (client.settings.jobs_dir / job_id / "input").is_dir()
-    assert client.delete(f"/api/jobs/{job_id}").status_code == 204
+    assert client.delete(f"/api/jobs/{job_id}", headers=owner(created)).status_code == 204
     assert not (client.settings.jobs_dir / job_id).exists()
     refused(client.get(f"/api/jobs/{job_id}"), 404, "no_such_job")
 

@@ -23,12 +23,13 @@ def service(tmp_path):
     live.stop()
 
 
-def upload(service: LiveService, path) -> str:
+def upload(service: LiveService, path) -> tuple[str, dict]:
+    """The new job's id, and the header its owner's requests carry."""
     with open(path, "rb") as f:
         r = httpx.post(f"{service.url}/api/jobs", files=[("files", (path.name, f, "application/zip"))],
                        timeout=60)
     assert r.status_code == 201, r.text
-    return r.json()["id"]
+    return r.json()["id"], {"Authorization": f"Bearer {r.json()['owner_token']}"}
 
 
 def started_at(service: LiveService, job_id: str) -> float:
@@ -40,7 +41,7 @@ def started_at(service: LiveService, job_id: str) -> float:
 def test_a_job_survives_a_killed_service_and_its_results_are_served(service, tmp_path):
     scene = posed_scene_zip(tmp_path / "scene.zip")
     service.start()
-    first, second = upload(service, scene), upload(service, scene)
+    (first, first_owner), (second, second_owner) = upload(service, scene), upload(service, scene)
     running = service.wait_for(first, ("training", "rendering", "done"))
     assert running["state"] == "training", "the job finished before it could be interrupted"
     assert service.wait_for(second, ("queued",))["queue_position"] == 0
@@ -54,7 +55,7 @@ def test_a_job_survives_a_killed_service_and_its_results_are_served(service, tmp
 
     service.start()
     assert service.wait_for(second, ("queued",))["state"] == "queued"  # queued jobs stay queued
-    httpx.post(f"{service.url}/api/jobs/{second}/cancel")  # (no need to wait for it)
+    httpx.post(f"{service.url}/api/jobs/{second}/cancel", headers=second_owner)  # (no need to wait)
     done = service.wait_for(first, ("done", "failed"))
     assert done["state"] == "done", done["error"]
     assert started_at(service, first) > killed_at  # started again after the restart
@@ -65,7 +66,7 @@ def test_a_job_survives_a_killed_service_and_its_results_are_served(service, tmp
     assert httpx.get(f"{service.url}/api/jobs/{first}").json()["state"] == "done"
     assert httpx.get(f"{service.url}/api/jobs/{first}/video.mp4").status_code == 200
 
-    assert httpx.delete(f"{service.url}/api/jobs/{first}").status_code == 204
+    assert httpx.delete(f"{service.url}/api/jobs/{first}", headers=first_owner).status_code == 204
     assert not (service.data / "jobs" / first).exists()
     assert httpx.get(f"{service.url}/api/jobs/{first}").status_code == 404
 

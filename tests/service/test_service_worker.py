@@ -6,6 +6,7 @@ the real pipeline runs in test_service_restart.py and test_e2e_browser.py.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import time
@@ -55,6 +56,21 @@ def buggy_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
 
 def crashing_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
     os._exit(3)  # as a segfault or the kernel's out-of-memory killer would end it
+
+
+def disk_full_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
+    """Fails as writing the results would on a full disk (the edge faked: no tmpfs without root)."""
+    result = job_dir(settings, job_id) / "result"
+    result.mkdir(parents=True, exist_ok=True)
+    (result / "poster.jpg").write_bytes(b"half")
+    raise OSError(errno.ENOSPC, "No space left on device", str(result / "video.mp4"))
+
+
+def once_out_of_memory_job(settings: ServiceSettings, job_id: str, run_token: str) -> int:
+    _mark(settings, job_id, "start")
+    if len(marks(settings, job_id)) == 1:
+        raise MemoryError("cannot allocate 12 GiB")
+    return 5
 
 
 def marks(settings: ServiceSettings, job_id: str) -> list:
@@ -114,19 +130,31 @@ def test_jobs_run_to_done_one_at_a_time_unless_configured(make_worker, concurren
     assert started == sorted(started)  # claimed in the queue's order
 
 
-@pytest.mark.parametrize("job_fn, message", [
-    (refusing_job, "only 2 of 12 photos could be placed; take more photos with overlap"),
-    (buggy_job, "internal error (KeyError: 'missing')"),
-    (crashing_job, "the job stopped unexpectedly (exit code 3"),
+@pytest.mark.parametrize("job_fn, message, attempts", [
+    (refusing_job, "only 2 of 12 photos could be placed; take more photos with overlap", 1),
+    (buggy_job, "internal error (KeyError: 'missing')", 1),
+    (disk_full_job, "the service's disk filled up while the job wrote its files", 1),
+    # a killed process is a transient fault (the OOM killer?): tried MAX_ATTEMPTS times
+    (crashing_job, f"the job failed {MAX_ATTEMPTS} times; last error: the job stopped "
+                   "unexpectedly (exit code 3", MAX_ATTEMPTS),
 ])
-def test_failures_end_the_job_with_a_message(make_worker, job_fn, message):
+def test_failures_end_the_job_with_a_message(make_worker, job_fn, message, attempts):
     worker = make_worker(job_fn)
     [job_id] = add_jobs(worker, 1)
     run_until(worker, lambda: state(worker, job_id) == "failed")
-    assert worker.store.get(job_id).error.startswith(message)
+    job = worker.store.get(job_id)
+    assert job.error.startswith(message) and job.attempts == attempts
     if job_fn is buggy_job:
         assert "KeyError" in (job_dir(worker.settings, job_id) / "error.log").read_text()
     run_until(worker, lambda: not worker.running)
+
+
+def test_out_of_memory_is_tried_again_and_the_job_completes(make_worker):
+    worker = make_worker(once_out_of_memory_job)
+    [job_id] = add_jobs(worker, 1)
+    run_until(worker, lambda: state(worker, job_id) == "done")
+    job = worker.store.get(job_id)
+    assert (job.attempts, job.frames, len(marks(worker.settings, job_id))) == (2, 5, 2)
 
 
 def test_cancel_stops_the_running_process(make_worker):

@@ -3,9 +3,11 @@
 Trusted-queue settings: a task is acknowledged only once it has finished (`acks_late`), and put
 back when the process running it dies (`reject_on_worker_lost`); a worker that vanishes altogether
 (a machine lost, SIGKILL) leaves its message unacknowledged in Redis, which hands it to another
-worker once `visibility_timeout` has passed. That timeout must exceed the longest job, or a live
-job is delivered twice (harmless: the store's compare-and-set lets only one try run, see store.py,
-but wasteful). Each worker takes one task at a time per process (prefetch 1).
+worker once `visibility_timeout` has passed. The service does not wait that long: its sweep sends
+the job again once the try's heartbeat has been silent `stale_seconds` (sweeps.py). The timeout
+must still exceed the longest job, or a live job is delivered twice (harmless: the store's
+compare-and-set lets only one try run, see store.py, but wasteful). Each worker takes one task at a
+time per process (prefetch 1).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ class ClusterSettings(BaseSettings):
     visibility_timeout: float = 3600.0  # seconds before an unacknowledged task is redelivered
     restore_interval: float = 10.0  # seconds between the workers' sweeps for such tasks
     heartbeat_seconds: float = 5.0  # how often a running try tells the service it is alive
-    stale_seconds: float = 30.0  # a try silent this long is dead: its job may be taken over
+    stale_seconds: float = 30.0  # a try silent this long is dead: the service sends its job again
+    silence_check_seconds: float = 5.0  # how often the service looks for silent tries and lost tasks
     queue_check_seconds: float = 30.0  # how long the service trusts its list of gpu workers
 
 

@@ -11,6 +11,7 @@ over HTTP, so they share no disk with the service.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import secrets
 import shutil
@@ -26,10 +27,12 @@ from starlette.background import BackgroundTask
 
 from windowshop.distributed.celery_app import ClusterSettings, configure, gpu_workers
 from windowshop.distributed.store import PREPARE, TRAIN, ClusterStore, default_db_url
+from windowshop.distributed.sweeps import BrokerWatch, resend_lost
 from windowshop.distributed.transfer import replace_folder, unzip_to, zip_folder
+from windowshop.errors import failure_reason
 from windowshop.service.jobs import load_job_config
 from windowshop.service.settings import ServiceSettings, job_dir
-from windowshop.service.store import Job, JobQueue
+from windowshop.service.store import FINISHED, Job, JobQueue
 
 log = logging.getLogger("windowshop.service")
 
@@ -46,28 +49,43 @@ class ClusterJobs(JobQueue):
         self.install_lock = threading.Lock()
 
     def create(self, job_id: str, input_kind: str, input_summary: str,
-               max_queued: int | None = None) -> Job | None:
+               max_queued: int | None = None, owner_hash: str | None = None) -> Job | None:
         from windowshop.pipeline import is_posed_scene
         from windowshop.service.jobs import pipeline_input
 
         phase = TRAIN if is_posed_scene(pipeline_input(job_dir(self.settings, job_id))) else PREPARE
         job = self.store.create(job_id, input_kind, input_summary, phase, secrets.token_urlsafe(24),
-                                max_queued)
+                                max_queued, owner_hash)
         if job is not None:
             self.dispatch(job_id)
         return job
 
-    def dispatch(self, job_id: str) -> None:
-        """Send the task of the job's current phase: prepare on `cpu`, train on `gpu` if any."""
+    def dispatch(self, job_id: str) -> bool:
+        """Send the task of the job's current phase: prepare on `cpu`, train on `gpu` if any.
+
+        A broker that cannot be reached leaves the job queued and marked unsent (False); the sweep
+        (sweeps.py) sends it once the broker is back.
+        """
         row = self.store.row(job_id)
-        queue = "gpu" if row["phase"] == TRAIN and self.have_gpu_workers() else "cpu"
+        if row is None:
+            return True
         # the worker runs the job as this service would: its job config, as JSON
         job = dataclasses.asdict(load_job_config(job_dir(self.settings, job_id), self.settings))
-        self.celery.send_task(
-            "windowshop.job_phase", task_id=job_id, queue=queue,
-            args=(job_id, row["phase"], self.url, row["worker_key"], job,
-                  self.cluster.heartbeat_seconds, self.cluster.stale_seconds))
+        try:
+            queue = "gpu" if row["phase"] == TRAIN and self.have_gpu_workers() else "cpu"
+            self.celery.send_task(
+                "windowshop.job_phase", task_id=job_id, queue=queue,
+                args=(job_id, row["phase"], self.url, row["worker_key"], job,
+                      self.cluster.heartbeat_seconds, self.cluster.stale_seconds),
+                retry_policy={"max_retries": 2, "interval_start": 0.2, "interval_step": 0.5})
+        except Exception as err:  # noqa: BLE001 - kombu's connection errors have no common base
+            self.store.set_dispatched(job_id, False)
+            log.warning("job %s: the broker is unreachable (%s); it is sent again later", job_id, err)
+            return False
+        if row["dispatched_at"] is None:
+            self.store.set_dispatched(job_id, True)
         log.info("job %s: %s sent to the %s queue", job_id, row["phase"], queue)
+        return True
 
     def have_gpu_workers(self) -> bool:
         checked, found = self._gpu
@@ -78,8 +96,12 @@ class ClusterJobs(JobQueue):
         return found
 
     def revoke(self, job_id: str) -> None:
-        """Kill the job's task wherever it runs (workers also check the store, see tasks.py)."""
-        self.celery.control.revoke(job_id, terminate=True, signal="SIGKILL")
+        """Kill the job's task wherever it runs. Best effort: a try that escapes (the broker is
+        away) is refused by the store at its next call, see tasks.py."""
+        try:
+            self.celery.control.revoke(job_id, terminate=True, signal="SIGKILL")
+        except Exception as err:  # noqa: BLE001 - kombu's connection errors have no common base
+            log.warning("job %s: could not revoke its task (%s)", job_id, err)
 
     def cancel(self, job_id: str) -> Job | None:
         job = self.store.cancel(job_id)
@@ -87,9 +109,14 @@ class ClusterJobs(JobQueue):
         return job
 
     def delete(self, job_id: str) -> bool:
+        job = self.store.get(job_id)
         deleted = self.store.delete(job_id)
-        self.revoke(job_id)
+        if job is not None and job.state not in FINISHED:
+            self.revoke(job_id)
         return deleted
+
+    def expired(self, finished_before: float) -> list[str]:
+        return self.store.expired(finished_before)
 
     def get(self, job_id: str) -> Job | None:
         return self.store.get(job_id)
@@ -173,7 +200,8 @@ def fail(request: Request, job_id: str, body: dict = Body(...),
          x_worker_key: str | None = Header(None)) -> dict:
     _checked(request, job_id, x_worker_key)
     jobs = _jobs(request)
-    verdict = jobs.store.fail_try(job_id, body["token"], str(body["error"])[:2000])
+    verdict = jobs.store.fail_try(job_id, body["token"], str(body["error"])[:2000],
+                                  transient=bool(body.get("transient", True)))
     if verdict is None:
         raise _Refused(409, STALE_TRY)
     if verdict == "retry":
@@ -182,17 +210,37 @@ def fail(request: Request, job_id: str, body: dict = Body(...),
     return {"verdict": verdict}
 
 
-async def _receive_folder(request: Request, dest: Path) -> Path:
-    """The request's body (a zip) unpacked into a new folder beside `dest`."""
+async def _receive_folder(request: Request, job_id: str, token: str, dest: Path) -> Path:
+    """The request's body (a zip) unpacked into a new folder beside `dest`.
+
+    A body over the job's size cap, or a disk that fills up while it is written, fails the job with
+    the reason (trying again would meet the same) and refuses the try (409).
+    """
+    jobs = _jobs(request)
     tmp = dest.with_name(f".{dest.name}-{secrets.token_hex(4)}")
     archive = tmp.with_suffix(".zip")
-    with open(archive, "wb") as f:
-        async for chunk in request.stream():
-            f.write(chunk)
+    reason, size = None, 0
     try:
-        await run_in_threadpool(unzip_to, archive, tmp)
+        with open(archive, "wb") as f:
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > jobs.settings.max_job_bytes:
+                    reason = (f"the job's {dest.name} is larger than the "
+                              f"{jobs.settings.max_job_bytes // 2**20} MiB one job may store")
+                    break
+                f.write(chunk)
+        if reason is None:
+            await run_in_threadpool(unzip_to, archive, tmp)
+    except OSError as err:
+        if err.errno != errno.ENOSPC:
+            raise
+        reason = failure_reason(err)
     finally:
-        archive.unlink()
+        archive.unlink(missing_ok=True)
+    if reason is not None:
+        shutil.rmtree(tmp, ignore_errors=True)
+        await run_in_threadpool(jobs.store.fail_try, job_id, token, reason, False)
+        raise _Refused(409, reason)
     return tmp
 
 
@@ -203,7 +251,7 @@ async def upload_scene(request: Request, job_id: str, token: str,
     jobs = _jobs(request)
     await run_in_threadpool(_checked, request, job_id, x_worker_key, token)
     dest = job_dir(jobs.settings, job_id) / "scene"
-    new = await _receive_folder(request, dest)
+    new = await _receive_folder(request, job_id, token, dest)
     return await run_in_threadpool(_install, jobs, job_id, token, new, dest, None)
 
 
@@ -214,7 +262,7 @@ async def upload_result(request: Request, job_id: str, token: str, frames: int,
     jobs = _jobs(request)
     await run_in_threadpool(_checked, request, job_id, x_worker_key, token)
     dest = job_dir(jobs.settings, job_id) / "result"
-    new = await _receive_folder(request, dest)
+    new = await _receive_folder(request, job_id, token, dest)
     return await run_in_threadpool(_install, jobs, job_id, token, new, dest, frames)
 
 
@@ -238,7 +286,10 @@ def create_cluster_app(settings: ServiceSettings, cluster: ClusterSettings) -> F
     from windowshop.service.app import create_app
 
     app = create_app(settings, start_worker=False)
-    app.state.store = ClusterJobs(settings, cluster)
+    jobs = app.state.store = ClusterJobs(settings, cluster)
+    watch = BrokerWatch(cluster.broker)
+    app.state.sweeps.append((cluster.silence_check_seconds,
+                             lambda: resend_lost(jobs, jobs.store, watch, cluster.stale_seconds)))
     app.include_router(internal)
 
     @app.exception_handler(_Refused)

@@ -8,7 +8,8 @@ without explicit locks; a delivery that lost the race changes nothing.
 
 A job runs in phases, each one Celery task: "prepare" (photos or a video -> a posed scene, on the
 `cpu` queue) then "train" (fit and render, on `gpu` when such workers exist). `attempts` counts the
-tries of the current phase; the MAX_ATTEMPTS-th failed try fails the job with its last error.
+tries of the current phase; a try failed by the user's input fails the job at once, and the
+MAX_ATTEMPTS-th try ended by a transient fault (or lost with its worker) fails it with its last error.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from windowshop.service.store import (CANCELLED, DONE, FAILED, FINISHED, MAX_ATT
 
 PREPARE, TRAIN = "prepare", "train"
 PHASE_STATE = {PREPARE: "preparing", TRAIN: "training"}
+LOST = "the worker running it was lost (killed, or out of memory?)"
 
 _meta = sa.MetaData()
 jobs = sa.Table(
@@ -47,8 +49,11 @@ jobs = sa.Table(
     sa.Column("worker_key", sa.String(64), nullable=False),  # the tasks' key to the worker routes
     sa.Column("worker", sa.Text),  # Celery hostname of the worker running (or last running) it
     sa.Column("heartbeat_at", sa.Float),  # last sign of life of the running attempt
+    sa.Column("dispatched_at", sa.Float),  # when its task was sent; None: the send failed
+    sa.Column("owner_hash", sa.String(64)),  # SHA-256 of the owner token (cancel, delete)
     sa.Index("jobs_state", "state", "created_at"),
 )
+_ADDED = ("dispatched_at", "owner_hash")  # columns created in an older store's table on first use
 _PUBLIC = [c.name for c in jobs.columns if c.name in Job.__dataclass_fields__]
 
 
@@ -72,21 +77,28 @@ class ClusterStore(JobStore):
     def __init__(self, url: str):
         self.engine = make_engine(url)
         _meta.create_all(self.engine)
+        have = {c["name"] for c in sa.inspect(self.engine).get_columns("jobs")}
+        with self.engine.begin() as db:
+            for name in _ADDED:
+                if name not in have:
+                    kind = jobs.c[name].type.compile(self.engine.dialect)
+                    db.exec_driver_sql(f"ALTER TABLE jobs ADD COLUMN {name} {kind}")
 
     def _update(self, where, **values) -> bool:
         with self.engine.begin() as db:
             return db.execute(sa.update(jobs).where(*where).values(**values)).rowcount == 1
 
     def create(self, job_id: str, input_kind: str, input_summary: str, phase: str, worker_key: str,
-               max_queued: int | None = None) -> Job | None:
+               max_queued: int | None = None, owner_hash: str | None = None) -> Job | None:
         """Queue a new job; None (and nothing stored) when `max_queued` jobs already wait."""
         with self.engine.begin() as db:
             if max_queued is not None and self._queued(db) >= max_queued:
                 return None
+            now = time.time()
             db.execute(sa.insert(jobs).values(
                 id=job_id, state=QUEUED, input_kind=input_kind, input_summary=input_summary,
-                created_at=time.time(), phase=phase, worker_key=worker_key, stages="{}",
-                progress=0.0, attempts=0, frames=0))
+                created_at=now, phase=phase, worker_key=worker_key, stages="{}",
+                progress=0.0, attempts=0, frames=0, dispatched_at=now, owner_hash=owner_hash))
         return self.get(job_id)
 
     def row(self, job_id: str) -> dict | None:
@@ -136,7 +148,7 @@ class ClusterStore(JobStore):
         if row is None or row["state"] in FINISHED or row["phase"] != phase:
             return "skip"
         if row["attempts"] >= MAX_ATTEMPTS:
-            last = row["error"] or "the worker running it was lost (killed, or out of memory?)"
+            last = row["error"] or LOST
             self._update(where, state=FAILED, run_token=None, eta_seconds=None, finished_at=now,
                          error=f"the job failed {MAX_ATTEMPTS} times; last error: {last}")
             return "skip"
@@ -161,7 +173,7 @@ class ClusterStore(JobStore):
         """The try finished its phase: the job waits for the `phase` task (tries counted anew)."""
         return self._update((jobs.c.id == job_id, jobs.c.run_token == run_token), phase=phase,
                             state=QUEUED, run_token=None, heartbeat_at=None, attempts=0,
-                            error=None)
+                            error=None, dispatched_at=time.time())
 
     def finish(self, job_id: str, run_token: str, frames: int) -> bool:
         """The try finished the job; False (nothing changed) when it is not the current one."""
@@ -169,22 +181,63 @@ class ClusterStore(JobStore):
                             error=None, frames=frames, eta_seconds=None, finished_at=time.time(),
                             run_token=None, heartbeat_at=None)
 
-    def fail_try(self, job_id: str, run_token: str, error: str) -> str | None:
-        """The try failed with `error`: "failed" (its last try) or "retry"; None when not current."""
+    def fail_try(self, job_id: str, run_token: str, error: str, transient: bool = True) -> str | None:
+        """The try failed with `error`: "failed" (a user's error, or its last try) or "retry" (a
+        transient fault: the job is queued again); None when the try is not current."""
         with self.engine.connect() as db:
             attempts = db.execute(sa.select(jobs.c.attempts).where(
                 jobs.c.id == job_id, jobs.c.run_token == run_token)).scalar()
         if attempts is None:
             return None
         mine = (jobs.c.id == job_id, jobs.c.run_token == run_token)
-        if attempts >= MAX_ATTEMPTS:
-            final = f"the job failed {MAX_ATTEMPTS} times; last error: {error}"
+        if not transient or attempts >= MAX_ATTEMPTS:
+            final = error if not transient else f"the job failed {MAX_ATTEMPTS} times; last error: {error}"
             done = self._update(mine, state=FAILED, error=final, run_token=None, eta_seconds=None,
-                                finished_at=time.time())
+                                finished_at=time.time(), heartbeat_at=None)
             return "failed" if done else None
         done = self._update(mine, state=QUEUED, error=error, run_token=None, eta_seconds=None,
-                            heartbeat_at=None)
+                            heartbeat_at=None, dispatched_at=time.time())
         return "retry" if done else None
+
+    def requeue_silent(self, stale_seconds: float) -> list[str]:
+        """Running jobs whose try has been silent `stale_seconds` (its worker is lost) go back to
+        the queue, or fail after MAX_ATTEMPTS tries; returns the requeued ids, to dispatch again.
+
+        Each change is conditional on the heartbeat still being old, so a try that spoke up in
+        between keeps its job.
+        """
+        now = time.time()
+        silent = (jobs.c.state.in_(RUNNING), jobs.c.heartbeat_at < now - stale_seconds)
+        with self.engine.connect() as db:
+            rows = db.execute(sa.select(jobs.c.id, jobs.c.attempts).where(*silent)).all()
+        requeued = []
+        for job_id, attempts in rows:
+            if attempts >= MAX_ATTEMPTS:
+                self._update((jobs.c.id == job_id, *silent), state=FAILED, run_token=None,
+                             eta_seconds=None, finished_at=now, heartbeat_at=None,
+                             error=f"the job failed {MAX_ATTEMPTS} times; last error: {LOST}")
+            elif self._update((jobs.c.id == job_id, *silent), state=QUEUED, run_token=None,
+                              eta_seconds=None, heartbeat_at=None, dispatched_at=now, error=LOST):
+                requeued.append(job_id)
+        return requeued
+
+    def set_dispatched(self, job_id: str, sent: bool) -> None:
+        """Record whether the job's task reached the broker (None: the sweep sends it again)."""
+        self._update((jobs.c.id == job_id,), dispatched_at=time.time() if sent else None)
+
+    def queued(self, undispatched_only: bool = False) -> list[str]:
+        """Ids of the queued jobs (only those whose task could not be sent, if asked)."""
+        where = [jobs.c.state == QUEUED]
+        if undispatched_only:
+            where.append(jobs.c.dispatched_at.is_(None))
+        with self.engine.connect() as db:
+            return list(db.execute(sa.select(jobs.c.id).where(*where)
+                                   .order_by(jobs.c.created_at)).scalars())
+
+    def expired(self, finished_before: float) -> list[str]:
+        with self.engine.connect() as db:
+            return list(db.execute(sa.select(jobs.c.id).where(
+                jobs.c.state.in_(FINISHED), jobs.c.finished_at < finished_before)).scalars())
 
     def cancel(self, job_id: str) -> Job | None:
         self._update((jobs.c.id == job_id, jobs.c.state.in_((QUEUED, *RUNNING))), state=CANCELLED,

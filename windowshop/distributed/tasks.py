@@ -20,22 +20,27 @@ from celery.utils.log import get_task_logger
 
 from windowshop.distributed.celery_app import ClusterSettings, app, configure
 from windowshop.distributed.transfer import Abandoned, ServiceClient
+from windowshop.errors import failure_reason, is_transient
 
 log = get_task_logger("windowshop.worker")
 _DEVICE: dict[str, str | None] = {"device": None}  # the worker's --device, for its task processes
 
 
-@app.task(bind=True, name="windowshop.job_phase", max_retries=None)
+@app.task(bind=True, name="windowshop.job_phase")
 def job_phase(self, job_id: str, phase: str, service_url: str, key: str, job: dict,
-              beat_seconds: float, busy_retry_seconds: float) -> str:
-    """Run `phase` ("prepare" or "train") of the job; returns what happened, for the log."""
+              beat_seconds: float, _stale_seconds: float) -> str:
+    """Run `phase` ("prepare" or "train") of the job; returns what happened, for the log.
+
+    (`_stale_seconds` is unused since the service itself resends the job of a silent try; it stays
+    so that services and workers of both versions understand each other's messages.)
+    """
     import secrets
 
     client = ServiceClient(service_url, job_id, key, secrets.token_hex(8))
     try:
+        # "busy": another live try runs it (this is a duplicate delivery); should that try die, the
+        # service's sweep notices its silence and sends the job again (distributed/sweeps.py)
         answer = client.claim(phase, self.request.hostname or socket.gethostname())
-        if answer == "busy":  # another live try runs it; look again in case that one dies
-            raise self.retry(countdown=busy_retry_seconds)
         if answer != "run":
             return answer
         log.info("job %s: %s (try %s)", job_id, phase, client.token)
@@ -54,21 +59,23 @@ def _run_try(client: ServiceClient, phase: str, job: dict, beat_seconds: float) 
         return "done"
     except Abandoned:
         return "abandoned"
-    except Exception as err:  # noqa: BLE001 - any failure is one failed try, retried by the service
+    except Exception as err:  # noqa: BLE001 - any failure ends the try; the service judges a retry
         if client.abandoned.is_set():
             return "abandoned"
         log.exception("job try failed")
-        message = str(err) if _is_user_error(err) else f"internal error ({type(err).__name__}: {err})"
-        return client.fail(message) or "abandoned"
+        return client.fail(failure_reason(err), _is_transient(err)) or "abandoned"
     finally:
         stop.set()
         beat.join()
 
 
-def _is_user_error(err: Exception) -> bool:
-    from windowshop.errors import UserError
+def _is_transient(err: Exception) -> bool:
+    """Retried: out of memory, a timeout, the service or its database briefly unreachable."""
+    import httpx
 
-    return isinstance(err, UserError)
+    if isinstance(err, httpx.HTTPStatusError):
+        return err.response.status_code >= 500
+    return is_transient(err)
 
 
 def _beat(client: ServiceClient, stop: threading.Event, seconds: float) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import threading
+import time
 import zipfile
 from pathlib import Path
 
@@ -83,13 +84,27 @@ class ServiceClient:
                         f.write(chunk)
             return unzip_to(archive, folder)
 
-    def upload(self, what: str, folder: Path, **params) -> dict:
-        """`folder` as the job's `what` ("scene" or "result") from this try."""
+    def upload(self, what: str, folder: Path, waits: tuple[float, ...] = (2.0, 5.0, 10.0),
+               **params) -> dict:
+        """`folder` as the job's `what` ("scene" or "result") from this try; sent again after each
+        of `waits` seconds while the service (or its database) is unreachable or failing, so a
+        brief restart does not cost the whole try."""
         with tempfile.TemporaryDirectory() as tmp:
             archive = zip_folder(folder, Path(tmp) / f"{what}.zip")
-            with open(archive, "rb") as f:
-                return self._post(what, params={"token": self.token, **params},
-                                  content=f).json()
+            for wait in waits:
+                try:
+                    return self._send(what, archive, params)
+                except httpx.HTTPStatusError as err:
+                    if err.response.status_code < 500:
+                        raise
+                except httpx.TransportError:
+                    pass
+                time.sleep(wait)
+            return self._send(what, archive, params)
+
+    def _send(self, what: str, archive: Path, params: dict) -> dict:
+        with open(archive, "rb") as f:
+            return self._post(what, params={"token": self.token, **params}, content=f).json()
 
     def report(self, job_id: str, run_token: str, stage: str, progress: float,
                stages: dict[str, float], eta_seconds: float | None) -> bool:
@@ -111,11 +126,13 @@ class ServiceClient:
         except (Abandoned, httpx.HTTPError):
             pass
 
-    def fail(self, error: str) -> str | None:
-        """Report the try's failure: "retry", "failed", or None when the try was no longer current."""
+    def fail(self, error: str, transient: bool) -> str | None:
+        """Report the try's failure: "retry", "failed", or None when the try was no longer current
+        or the service could not be told (its sweep then notices the silent try)."""
         try:
-            return self._post("fail", json={"token": self.token, "error": error}).json()["verdict"]
-        except Abandoned:
+            return self._post("fail", json={"token": self.token, "error": error,
+                                            "transient": transient}).json()["verdict"]
+        except (Abandoned, httpx.HTTPError):
             return None
 
 

@@ -17,6 +17,7 @@ from fastapi.staticfiles import StaticFiles
 
 from windowshop.service import routes
 from windowshop.service.db import SQLiteJobStore
+from windowshop.service.retention import Sweeper, sweep_expired
 from windowshop.service.settings import ServiceSettings
 from windowshop.service.worker import JobFunction, run_worker
 
@@ -38,13 +39,19 @@ def create_app(settings: ServiceSettings | None = None, start_worker: bool = Tru
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         app.state.worker = _start_worker(settings, job_fn) if start_worker else None
+        sweeper = Sweeper(app.state.sweeps).start()
         yield
+        sweeper.stop()
         if app.state.worker is not None:
             _stop_worker(app.state.worker)
 
     app = FastAPI(title="windowshop", lifespan=lifespan, version="0.1.0",
                   description="Photos of an object in, a 360° turntable video out.")
     app.state.settings, app.state.store, app.state.worker = settings, SQLiteJobStore(settings.db_path), None
+    # (period, function) run by the web process; the store is looked up when it runs, since the
+    # distributed mode replaces it (and adds its own sweep, distributed/sweeps.py)
+    app.state.sweeps = [(settings.retention_check_seconds,
+                         lambda: sweep_expired(settings, app.state.store))]
     app.include_router(routes.router)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 

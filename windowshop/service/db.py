@@ -15,8 +15,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from windowshop.service.store import (CANCELLED, FAILED, MAX_ATTEMPTS, QUEUED, RUNNING, Job,
-                                      JobStore)
+from windowshop.service.store import (CANCELLED, FAILED, FINISHED, MAX_ATTEMPTS, QUEUED, RUNNING,
+                                      Job, JobStore)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -34,10 +34,13 @@ CREATE TABLE IF NOT EXISTS jobs (
     finished_at REAL,
     run_token TEXT,
     attempts INTEGER NOT NULL DEFAULT 0,
-    frames INTEGER NOT NULL DEFAULT 0
+    frames INTEGER NOT NULL DEFAULT 0,
+    owner_hash TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_at);
 """
+# Columns added since the first release, created in an older store's table on first use.
+_ADDED = {"owner_hash": "TEXT"}
 
 
 class SQLiteJobStore(JobStore):
@@ -49,6 +52,10 @@ class SQLiteJobStore(JobStore):
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(_SCHEMA)
+            have = {row["name"] for row in db.execute("PRAGMA table_info(jobs)")}
+            for name, kind in _ADDED.items():
+                if name not in have:
+                    db.execute(f"ALTER TABLE jobs ADD COLUMN {name} {kind}")
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
@@ -72,16 +79,22 @@ class SQLiteJobStore(JobStore):
             db.execute("COMMIT")
 
     def create(self, job_id: str, input_kind: str, input_summary: str,
-               max_queued: int | None = None) -> Job | None:
+               max_queued: int | None = None, owner_hash: str | None = None) -> Job | None:
         """Queue a new job; None (and nothing stored) when `max_queued` jobs already wait."""
         with self._transaction() as db:
             waiting = db.execute("SELECT COUNT(*) FROM jobs WHERE state = ?", (QUEUED,)).fetchone()[0]
             if max_queued is not None and waiting >= max_queued:
                 return None
-            db.execute("INSERT INTO jobs (id, state, input_kind, input_summary, created_at) "
-                       "VALUES (?, ?, ?, ?, ?)",
-                       (job_id, QUEUED, input_kind, input_summary, time.time()))
+            db.execute("INSERT INTO jobs (id, state, input_kind, input_summary, created_at, "
+                       "owner_hash) VALUES (?, ?, ?, ?, ?, ?)",
+                       (job_id, QUEUED, input_kind, input_summary, time.time(), owner_hash))
         return self.get(job_id)
+
+    def expired(self, finished_before: float) -> list[str]:
+        with self._connect() as db:
+            rows = db.execute(f"SELECT id FROM jobs WHERE state IN ({_marks(len(FINISHED))}) "
+                              "AND finished_at < ?", (*FINISHED, finished_before)).fetchall()
+        return [r["id"] for r in rows]
 
     def get(self, job_id: str) -> Job | None:
         with self._connect() as db:
@@ -129,6 +142,24 @@ class SQLiteJobStore(JobStore):
                              "finished_at = ?, run_token = NULL WHERE id = ? AND run_token = ?",
                              (state, error, frames, time.time(), job_id, run_token))
         return cur.rowcount == 1
+
+    def retry(self, job_id: str, run_token: str, error: str) -> str | None:
+        """This run met a transient fault (out of memory, its process killed): the job is queued
+        again ("retry"), or failed after MAX_ATTEMPTS tries ("failed"); None when not this run's."""
+        with self._transaction() as db:
+            row = db.execute("SELECT attempts FROM jobs WHERE id = ? AND run_token = ?",
+                             (job_id, run_token)).fetchone()
+            if row is None:
+                return None
+            if row["attempts"] < MAX_ATTEMPTS:
+                db.execute("UPDATE jobs SET state = ?, error = ?, run_token = NULL, eta_seconds = NULL "
+                           "WHERE id = ?", (QUEUED, error, job_id))
+                return "retry"
+            db.execute("UPDATE jobs SET state = ?, error = ?, run_token = NULL, eta_seconds = NULL, "
+                       "finished_at = ? WHERE id = ?",
+                       (FAILED, f"the job failed {MAX_ATTEMPTS} times; last error: {error}",
+                        time.time(), job_id))
+            return "failed"
 
     def cancel(self, job_id: str) -> Job | None:
         """Cancel a queued or running job (the worker then stops its process); None when unknown."""

@@ -1,11 +1,16 @@
 """The job API: create a job from an upload, read its state, fetch its results, cancel, delete.
 
 A job is reachable only through its id (a random 128-bit token); there is no route that lists jobs.
-Every refusal answers `{"error": code, "detail": message}` with a 4xx (or 503) status.
+Whoever has the id may watch the job; only its owner may cancel or delete it: creation answers an
+`owner_token` (the store keeps its SHA-256 alone), which those two routes need as
+`Authorization: Bearer <token>`. Every refusal answers `{"error": code, "detail": message}` with a
+4xx (or 503, 507) status.
 """
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import json
 import re
 import secrets
@@ -23,6 +28,7 @@ from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
 from windowshop.overrides import leaves
 from windowshop.service.jobs import FRAME_NAME, job_config, save_job_config
+from windowshop.service.retention import folder_bytes
 from windowshop.service.settings import ServiceSettings, job_dir
 from windowshop.service.store import DONE, FINISHED, QUEUED, Job, JobQueue
 from windowshop.service.uploads import UploadRefused, check_upload, copy_limited
@@ -52,6 +58,7 @@ class JobCreated(BaseModel):
     id: str
     url: str  # the job's API address
     page: str  # the page that shows the job (the link to share)
+    owner_token: str  # needed to cancel or delete the job (Authorization: Bearer ...); shown once
 
 
 class JobLinks(BaseModel):
@@ -81,7 +88,7 @@ class ApiRefusal(BaseModel):
     detail: str
 
 
-_REFUSALS = {code: {"model": ApiRefusal} for code in (400, 404, 409, 413, 415, 503)}
+_REFUSALS = {code: {"model": ApiRefusal} for code in (400, 403, 404, 409, 413, 415, 503, 507)}
 
 
 def _store(request: Request) -> JobQueue:
@@ -96,6 +103,25 @@ def _job(request: Request, job_id: str) -> Job:
     job = _store(request).get(job_id) if _ID.match(job_id) else None
     if job is None:
         raise ApiError(404, "no_such_job", f"there is no job {job_id!r} (deleted, or a mistyped link)")
+    return job
+
+
+def owner_hash(token: str) -> str:
+    """What the store keeps of an owner token (a random 256-bit one: a plain hash is enough)."""
+    return hashlib.sha256(token.encode()).hexdigest()
+
+
+def _owned(request: Request, job_id: str) -> Job:
+    """The job, when the request carries its owner token (403 otherwise)."""
+    job = _job(request, job_id)
+    scheme, _, token = request.headers.get("authorization", "").partition(" ")
+    if scheme.lower() != "bearer" or not token.strip():
+        raise ApiError(403, "not_owner", "only the job's owner may do this: send the owner_token "
+                       "its creation answered, as 'Authorization: Bearer <token>'")
+    if job.owner_hash is None or not secrets.compare_digest(job.owner_hash,
+                                                            owner_hash(token.strip())):
+        raise ApiError(403, "not_owner", "this owner token is not the job's; only the browser "
+                       "(or client) that created the job may cancel or delete it")
     return job
 
 
@@ -158,19 +184,47 @@ async def create_job(request: Request) -> JobCreated:
     length = request.headers.get("content-length", "")
     if length.isdigit() and int(length) > settings.max_upload_bytes:
         raise _too_large(settings.max_upload_bytes)
-    job_id = secrets.token_urlsafe(16)
+    _check_free_space(settings)
+    job_id, token = secrets.token_urlsafe(16), secrets.token_urlsafe(32)
     folder = job_dir(settings, job_id)
     try:
         checked = await _receive_upload(request, folder, settings)
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
+        await run_in_threadpool(_check_stored_size, folder, settings)
+    except BaseException as err:
+        shutil.rmtree(folder, ignore_errors=True)  # this upload only: saved jobs are untouched
+        if isinstance(err, OSError) and err.errno == errno.ENOSPC:
+            raise ApiError(507, "disk_full", "the service's disk filled up while the upload was "
+                           "saved; try again later", headers={"Retry-After": "600"}) from None
         raise
     job = await run_in_threadpool(store.create, job_id, checked.kind, checked.summary,
-                                  settings.max_queued)
+                                  settings.max_queued, owner_hash(token))
     if job is None:
         shutil.rmtree(folder, ignore_errors=True)  # the queue filled while this upload came in
         raise _queue_full(settings)
-    return JobCreated(id=job_id, url=f"/api/jobs/{job_id}", page=f"/jobs/{job_id}")
+    return JobCreated(id=job_id, url=f"/api/jobs/{job_id}", page=f"/jobs/{job_id}",
+                      owner_token=token)
+
+
+def _check_free_space(settings: ServiceSettings) -> None:
+    """507 while the data folder's disk has less than `min_free_bytes` free (running jobs need it)."""
+    free = shutil.disk_usage(settings.jobs_dir).free
+    if free < settings.min_free_bytes:
+        raise ApiError(507, "disk_full", f"the service is short of disk space ({_mib(free)} free, "
+                       f"{_mib(settings.min_free_bytes)} kept for running jobs); try again later",
+                       headers={"Retry-After": "600"})
+
+
+def _check_stored_size(folder: Path, settings: ServiceSettings) -> None:
+    """413 when the checked upload takes more than `max_job_bytes`; 507 when it left too little free."""
+    size = folder_bytes(folder)
+    if size > settings.max_job_bytes:
+        raise ApiError(413, "job_too_large", f"the upload takes {_mib(size)} once unpacked; one "
+                       f"job may store at most {_mib(settings.max_job_bytes)}")
+    _check_free_space(settings)
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.1f} MiB"
 
 
 async def _receive_upload(request: Request, folder: Path, settings: ServiceSettings):
@@ -262,18 +316,18 @@ def get_frame(request: Request, job_id: str, index: int) -> FileResponse:
 
 
 @router.post("/jobs/{job_id}/cancel", response_model=JobStatus, responses=_REFUSALS,
-             summary="Cancel a queued or running job")
+             summary="Cancel a queued or running job (its owner only: Authorization: Bearer)")
 def cancel_job(request: Request, job_id: str) -> JobStatus:
-    job = _job(request, job_id)
+    job = _owned(request, job_id)
     if job.state in FINISHED:
         raise ApiError(409, "finished", f"the job is already {job.state}")
     return job_status(request, _store(request).cancel(job_id))
 
 
 @router.delete("/jobs/{job_id}", status_code=204, response_class=Response, responses=_REFUSALS,
-               summary="Delete a job and all its files (a running job is stopped first)")
+               summary="Delete a job and all its files (its owner only; a running job is stopped)")
 def delete_job(request: Request, job_id: str) -> Response:
-    _job(request, job_id)
+    _owned(request, job_id)
     _store(request).delete(job_id)
     shutil.rmtree(job_dir(_settings(request), job_id), ignore_errors=True)
     return Response(status_code=204)

@@ -34,6 +34,12 @@ class ServiceSettings(BaseSettings):
     max_video_seconds: float = 300.0
     max_queued: int = 100  # jobs waiting; more are refused with 503 until the queue drains
 
+    # Disk (see retention.py).
+    retention_days: float = 7.0  # a job's files and row are deleted this long after it ended
+    retention_check_seconds: float = 3600.0  # how often the service looks for expired jobs
+    min_free_bytes: int = 1 * 2**30  # uploads are refused (507) while the data disk has less free
+    max_job_bytes: int = 2 * 2**30  # one job's stored upload, once checked and unpacked (else 413)
+
     # The worker.
     concurrency: int = 1  # jobs run at once, each in its own process
     poll_seconds: float = 0.5  # how often the worker looks at the queue and at cancellations

@@ -36,6 +36,7 @@ class Job:
     run_token: str | None = None
     attempts: int = 0
     frames: int = 0  # per-frame images available once done
+    owner_hash: str | None = None  # SHA-256 of the owner token that may cancel or delete the job
 
 
 class ProgressStore(Protocol):
@@ -73,5 +74,8 @@ class JobQueue(JobLookup, Protocol):
     """The API's store: a JobLookup that also queues new jobs (SQLiteJobStore, or ClusterJobs)."""
 
     def create(self, job_id: str, input_kind: str, input_summary: str,
-               max_queued: int | None = None) -> Job | None:
+               max_queued: int | None = None, owner_hash: str | None = None) -> Job | None:
         """Queue a new job; None (and nothing stored) when `max_queued` jobs already wait."""
+
+    def expired(self, finished_before: float) -> list[str]:
+        """Ids of the jobs that ended (done, failed, cancelled) before this Unix time."""

@@ -20,9 +20,10 @@ import threading
 import time
 import traceback
 from multiprocessing.process import BaseProcess
+from pathlib import Path
 from typing import Callable
 
-from windowshop.errors import UserError
+from windowshop.errors import UserError, failure_reason, is_transient
 from windowshop.service.db import SQLiteJobStore
 from windowshop.service.jobs import run_job
 from windowshop.service.settings import ServiceSettings, job_dir
@@ -78,16 +79,16 @@ class Worker:
             log.info("job %s started (attempt %d)", job.id, job.attempts)
 
     def _reap(self) -> None:
-        """Forget finished processes; a process that died without ending its job fails the job."""
+        """Forget finished processes; a process that died without ending its job (killed, as by the
+        OOM killer) puts the job back in the queue, or fails it after MAX_ATTEMPTS tries."""
         for job_id, (process, token) in list(self.running.items()):
             if process.is_alive():
                 continue
             process.join()
             del self.running[job_id]
-            if process.exitcode != 0:
-                self.store.finish(job_id, token, FAILED, error=f"the job stopped unexpectedly (exit "
-                                  f"code {process.exitcode}, out of memory?); try fewer or "
-                                  "smaller photos")
+            if process.exitcode != 0:  # killed (the OOM killer?): a transient fault, tried again
+                self.store.retry(job_id, token, error=f"the job stopped unexpectedly (exit code "
+                                 f"{process.exitcode}, out of memory?); try fewer or smaller photos")
             self._clean_up(job_id)
 
     def _stop_abandoned(self) -> None:
@@ -139,15 +140,25 @@ def _job_main(job_fn: JobFunction, settings: ServiceSettings, job_id: str, token
     store = SQLiteJobStore(settings.db_path)
     try:
         frames = job_fn(settings, job_id, token)
-    except UserError as err:
+    except UserError as err:  # the user's to fix: failed at once, never tried again
         store.finish(job_id, token, FAILED, error=str(err))
     except Exception as err:  # noqa: BLE001 - any bug must end as a failed job, not a hung one
-        log_path = job_dir(settings, job_id) / "error.log"
-        log_path.parent.mkdir(parents=True, exist_ok=True)
-        log_path.write_text(traceback.format_exc())
-        store.finish(job_id, token, FAILED, error=f"internal error ({type(err).__name__}: {err})")
+        _write_error_log(job_dir(settings, job_id) / "error.log")
+        if is_transient(err):
+            store.retry(job_id, token, failure_reason(err))
+        else:
+            store.finish(job_id, token, FAILED, error=failure_reason(err))
     else:
         store.finish(job_id, token, DONE, frames=frames)
+
+
+def _write_error_log(path: Path) -> None:
+    """The traceback beside the job, for its operator; skipped when the disk itself is full."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(traceback.format_exc())
+    except OSError:
+        pass
 
 
 def _exit_with_parent(parent_pid: int, period: float = 0.5) -> None:

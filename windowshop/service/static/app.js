@@ -35,7 +35,14 @@ function rememberJob(id, name) {
 
 function forgetJob(id) {
   saveJobs(myJobs().filter((j) => j.id !== id));
+  localStorage.removeItem(ownerKey(id));
 }
+
+// The owner token the service gave when this browser created the job: cancel and delete need it
+// (whoever has a shared link may watch the job, not remove it).
+const ownerKey = (id) => `windowshop.owner.${id}`;
+const isOwner = (id) => Boolean(localStorage.getItem(ownerKey(id)));
+const ownerHeaders = (id) => ({ Authorization: `Bearer ${localStorage.getItem(ownerKey(id))}` });
 
 async function showMyJobs() {
   const list = $("my-jobs");
@@ -111,6 +118,7 @@ function upload() {
     $("send").disabled = false;
     const body = request.response || {};
     if (request.status === 201) {
+      localStorage.setItem(ownerKey(body.id), body.owner_token);
       rememberJob(body.id, describe(chosen));
       clearFiles();
       history.pushState({}, "", body.page);
@@ -171,7 +179,7 @@ function showStatus(status) {
   if (badge) { badge.textContent = status.state; badge.dataset.state = status.state; }
   $("stages").hidden = status.state === "done";
   showStages(status);
-  $("cancel").hidden = FINISHED.includes(status.state);
+  $("cancel").hidden = FINISHED.includes(status.state) || !isOwner(status.id);
   if (status.error) showError($("job-error"), status.error); else $("job-error").hidden = true;
   if (status.state === "done" && $("result").hidden) showResult(status);
 }
@@ -280,13 +288,15 @@ async function share() {
 }
 
 async function cancelJob(id) {
-  await fetch(`/api/jobs/${id}/cancel`, { method: "POST" });
+  const response = await fetch(`/api/jobs/${id}/cancel`, { method: "POST", headers: ownerHeaders(id) });
+  if (response.status === 403) { showError($("job-error"), (await response.json()).detail); return; }
   follow(id);
 }
 
 async function deleteJob(id) {
   if (!confirm("Delete this spin and its files for everyone with the link?")) return;
-  await fetch(`/api/jobs/${id}`, { method: "DELETE" });
+  const response = await fetch(`/api/jobs/${id}`, { method: "DELETE", headers: ownerHeaders(id) });
+  if (response.status === 403) { showError($("job-error"), (await response.json()).detail); return; }
   forgetJob(id);
   history.pushState({}, "", "/");
   route();
@@ -303,7 +313,7 @@ function route() {
     const id = match[1];
     $("result").hidden = true;
     $("download").hidden = $("share").hidden = $("share-note").hidden = true;
-    $("delete").hidden = false;
+    $("delete").hidden = !isOwner(id);
     $("job-error").hidden = true;
     $("cancel").onclick = () => cancelJob(id);
     $("delete").onclick = () => deleteJob(id);

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from windowshop.config import FitConfig
 from windowshop.device import ThreadTuner
@@ -36,6 +35,7 @@ from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
 from windowshop.fit.schedule import Hook, StepInfo, schedule_for
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
+from windowshop.progress import bar as progress_bar
 from windowshop.scene.hull import carve_mask
 from windowshop.scene.types import BACKGROUNDS, Camera, Scene
 
@@ -216,8 +216,7 @@ def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bo
     config, progress = run.config, run.progress
     run.model.train()
     total = config.iters if config.iters and not config.seconds else None
-    bar = tqdm(total=total, initial=progress.step, disable=not show_progress, unit="step",
-               dynamic_ncols=True)
+    bar = progress_bar(total=total, desc="fit", unit="step", initial=progress.step, show=show_progress)
     tuner = ThreadTuner(bank.device)
     with open(run.out_dir / LOG, "a") as log, bar, contextlib.closing(tuner):
         while progress.fraction(config) < 1.0:

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from windowshop.config import VideoOptions
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
 from windowshop.model import Bounds, RadianceModel
+from windowshop.progress import bar as progress_bar
 from windowshop.scene.cameras import box_corners
 from windowshop.scene.types import BACKGROUNDS, Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
@@ -78,7 +78,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
 
     Each frame is rendered `chunk` rays at a time and handed to the writers at once, so memory
     stays bounded at any resolution and length. `on_frame(done, total)` reports progress (the
-    web service's jobs); `progress` shows a tqdm bar on stderr.
+    web service's jobs); `progress` shows a bar on stderr (plain lines when it is not a terminal).
     """
     from windowshop.render.frames import model_device, render_camera
 
@@ -92,7 +92,7 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
     tuner = ThreadTuner(model_device(model), trial_steps=2)  # ffmpeg takes a core too
     with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
             contextlib.closing(tuner):
-        for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):
+        for k, camera in enumerate(progress_bar(cameras, desc="render", unit="frame", show=progress)):
             tuner.before_step()
             began = time.perf_counter()
             frame = render_camera(model, camera, background=background, chunk=chunk)

@@ -1,6 +1,7 @@
 """Whole images from any `RadianceModel`: rays of a camera rendered in chunks, without gradients.
 
-Memory is bounded by `chunk` rays at a time whatever the image size; results come back as numpy.
+Memory is bounded by a budget in bytes whatever the image size: each chunk holds as many rays as
+the model's `bytes_per_ray` lets fit in it (windowshop/memory.py). Results come back as numpy.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from windowshop.memory import MEMORY_BUDGET, spans
 from windowshop.model import RadianceModel
 from windowshop.rays import camera_rays
 from windowshop.scene.types import BACKGROUNDS, Camera
@@ -38,9 +40,10 @@ def model_device(model: torch.nn.Module) -> torch.device:
 
 @torch.no_grad()
 def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions: torch.Tensor,
-                        background: torch.Tensor, chunk: int = 8192
+                        background: torch.Tensor, memory_budget: int = MEMORY_BUDGET
                         ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Render rays `origins`, `directions` (R, 3) over `background` (3,) in chunks of `chunk` rays.
+    """Render rays `origins`, `directions` (R, 3) over `background` (3,) in chunks of rays that
+    each take at most `memory_budget` bytes.
 
     Returns rgb (R, 3), depth (R,), opacity (R,) on the rays' device. Switches the model to eval
     mode (deterministic samples) for the call and restores its previous mode.
@@ -49,8 +52,8 @@ def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions:
     model.eval()
     try:
         parts = []
-        for start in range(0, origins.shape[0], chunk):
-            o, d = origins[start:start + chunk], directions[start:start + chunk]
+        for span in spans(origins.shape[0], model.bytes_per_ray(training=False), memory_budget):
+            o, d = origins[span], directions[span]
             out = model.render_rays(o, d, background.expand(o.shape[0], 3))
             parts.append((out.rgb, out.depth, out.opacity))
     finally:
@@ -61,12 +64,12 @@ def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions:
 
 def render_camera(model: RadianceModel, camera: Camera,
                   background: tuple[float, float, float] = (1.0, 1.0, 1.0),
-                  chunk: int = 8192) -> Frame:
+                  memory_budget: int = MEMORY_BUDGET) -> Frame:
     """Render every pixel of `camera` (in the model's normalised frame) on the model's device."""
     device = model_device(model)
     origins, directions = camera_rays(camera, device=device)
     bg = torch.tensor(background, dtype=torch.float32, device=device)
-    rgb, depth, opacity = render_rays_chunked(model, origins, directions, bg, chunk)
+    rgb, depth, opacity = render_rays_chunked(model, origins, directions, bg, memory_budget)
     shape = (camera.height, camera.width)
     return Frame(rgb=rgb.clamp(0, 1).reshape(*shape, 3).cpu().numpy(),
                  depth=depth.reshape(shape).cpu().numpy(),

@@ -1,7 +1,9 @@
 """nerfstudio / instant-ngp `transforms.json`: OpenGL c2w per frame, intrinsics global or per
 frame (scene/intrinsics.py: `fl_x fl_y cx cy w h`, fields of view, OPENCV or OPENCV_FISHEYE
 lenses), optional `mask_path` (frames whose mask file is missing leave every mask out, with a
-warning), optional `{train,val,test}_filenames` splits. `depth_file_path`, `applied_transform`
+warning), optional `{train,val,test}_filenames` splits, optional `ply_file_path` (nerfstudio's sparse
+points, in the file's frame: they bound the object; a missing one is noted and skipped).
+`depth_file_path`, `applied_transform`
 (how nerfstudio moved COLMAP's frame: the poses already carry it) and instant-ngp's `aabb_scale`,
 `scale`, `offset` are not needed and left alone."""
 
@@ -19,6 +21,7 @@ from windowshop.scene.blender import image_file, read_json
 from windowshop.scene.cameras import c2w_matrix
 from windowshop.scene.images import image_size
 from windowshop.scene.intrinsics import frame_intrinsics, needs_image_size
+from windowshop.scene.ply import read_ply_points
 from windowshop.scene.source import Source, SourceFrame
 from windowshop.scene.types import SPLITS
 
@@ -59,15 +62,31 @@ def read_nerfstudio(path: Path) -> Source:
             distortion=None if distortion.is_identity else distortion, mask_path=mask))
     extra = meta.get(WRITER_KEY) or {}
     box = np.asarray(extra["aabb"], dtype=np.float64) if "aabb" in extra else None
-    return Source(format="nerfstudio", path=path, frames=_masks_or_none(frames, path), box=box,
-                  background=extra.get("background"), normalized="transform" in extra)
+    notes: list[str] = []
+    return Source(format="nerfstudio", path=path, frames=_masks_or_none(frames, path, notes), box=box,
+                  background=extra.get("background"), normalized="transform" in extra,
+                  points=_points(meta, root, notes), notes=notes)
 
 
-def _masks_or_none(frames: list[SourceFrame], path: Path) -> list[SourceFrame]:
+def _points(meta: dict, root: Path, notes: list[str]) -> np.ndarray | None:
+    """The sparse points of `ply_file_path`, if the file names one and it exists."""
+    if not meta.get("ply_file_path"):
+        return None
+    path = root / meta["ply_file_path"]
+    if not path.is_file():
+        notes.append(f"{path}: the point cloud ply_file_path names is missing, not used")
+        return None
+    points = read_ply_points(path)
+    notes.append(f"{path}: {len(points)} points")
+    return points
+
+
+def _masks_or_none(frames: list[SourceFrame], path: Path, notes: list[str]) -> list[SourceFrame]:
     """`frames`, without masks when any frame's mask file is missing (a scene is masked or not)."""
     missing = [f.mask_path for f in frames if f.mask_path is not None and not f.mask_path.is_file()]
     if not missing:
         return frames
     log.warning("%s: %d mask file(s) missing (first %s); every mask is left out", path,
                 len(missing), missing[0])
+    notes.append(f"{len(missing)} mask file(s) missing (first {missing[0]}): no masks used")
     return [replace(f, mask_path=None) for f in frames]

@@ -35,8 +35,8 @@ DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_sce
 MIN_VOXELS = 16**3
 CARVE_VOXELS = 96**3  # the finest carve mask (FastModel.carve_cells)
 # bytes one marched sample takes (t, weight, ray index, its density and feature reads), and while
-# training with its gradients; measured peaks stay below these (bench/bench_memory.py)
-SAMPLE_BYTES = 64
+# training with its gradients: lego_tiny's final grid with every cell occupied peaked at 96 and 220
+SAMPLE_BYTES = 96
 SAMPLE_BYTES_TRAINING = 256
 
 

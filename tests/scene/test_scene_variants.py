@@ -150,3 +150,16 @@ def test_nerfstudio_missing_masks_leave_every_mask_out(tmp_path, caplog):
     assert "masks/2.png" in caplog.text and "no masks used" in source.notes[0]
     scene = load_scene(path, SceneOptions(normalize=False))
     assert all(v.alpha is None for v in scene.views)
+
+
+def test_nerfstudio_downscaled_copies_are_read_for_a_downscaled_scene(tmp_path):
+    path = _nerfstudio(tmp_path)
+    (tmp_path / "images_2").mkdir()
+    for k in range(4):
+        Image.new("RGB", (8, 6), (10, 200, 10)).save(tmp_path / "images_2" / f"{k}.png")
+    assert read_source(path).frames[0].prescaled == {2: tmp_path / "images_2" / "0.png"}
+    half = load_scene(path, SceneOptions(downscale=2, normalize=False))
+    full = load_scene(path, SceneOptions(normalize=False))
+    assert half.views[0].image[0, 0, 1] == pytest.approx(200 / 255)  # the copy
+    assert full.views[0].image[0, 0, 1] == pytest.approx(90 / 255)  # the original
+    assert half.views[0].camera.fx == pytest.approx(10.0)

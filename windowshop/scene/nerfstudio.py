@@ -1,7 +1,8 @@
 """nerfstudio / instant-ngp `transforms.json`: OpenGL c2w per frame, intrinsics global or per
 frame (scene/intrinsics.py: `fl_x fl_y cx cy w h`, fields of view, OPENCV or OPENCV_FISHEYE
 lenses), optional `mask_path` (frames whose mask file is missing leave every mask out, with a
-warning), optional `{train,val,test}_filenames` splits, optional `ply_file_path` (nerfstudio's sparse
+warning), optional `{train,val,test}_filenames` splits, the `images_N/` copies ns-process-data writes
+(decoded instead when the scene is loaded downscaled), optional `ply_file_path` (nerfstudio's sparse
 points, in the file's frame: they bound the object; a missing one is noted and skipped).
 `depth_file_path`, `applied_transform`
 (how nerfstudio moved COLMAP's frame: the poses already carry it) and instant-ngp's `aabb_scale`,
@@ -28,6 +29,7 @@ from windowshop.scene.types import SPLITS
 log = logging.getLogger(__name__)
 
 WRITER_KEY = "windowshop"  # extra key our writer adds: normalisation, box and background
+PRESCALED = (2, 4, 8)  # ns-process-data's downscaled copies: images_2/, images_4/, images_8/
 
 
 def _splits(meta: dict) -> dict[str, str]:
@@ -59,13 +61,22 @@ def read_nerfstudio(path: Path) -> Source:
         frames.append(SourceFrame(
             camera=replace(camera, c2w=c2w_matrix(frame["transform_matrix"], where)),
             image_path=image, split=splits.get(os.path.normpath(frame["file_path"])),
-            distortion=None if distortion.is_identity else distortion, mask_path=mask))
+            distortion=None if distortion.is_identity else distortion, mask_path=mask,
+            prescaled=_prescaled(image)))
     extra = meta.get(WRITER_KEY) or {}
     box = np.asarray(extra["aabb"], dtype=np.float64) if "aabb" in extra else None
     notes: list[str] = []
     return Source(format="nerfstudio", path=path, frames=_masks_or_none(frames, path, notes), box=box,
                   background=extra.get("background"), normalized="transform" in extra,
                   points=_points(meta, root, notes), notes=notes)
+
+
+def _prescaled(image: Path) -> dict[int, Path]:
+    """factor -> nerfstudio's downscaled copy of `image`, in `images_N/` beside its `images/`."""
+    if image.parent.name != "images":
+        return {}
+    copies = {f: image.parent.with_name(f"images_{f}") / image.name for f in PRESCALED}
+    return {f: path for f, path in copies.items() if path.is_file()}
 
 
 def _points(meta: dict, root: Path, notes: list[str]) -> np.ndarray | None:

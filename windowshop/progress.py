@@ -49,7 +49,8 @@ class LineProgress:
         percent = f" ({100.0 * self.n / self.total:.0f}%)" if self.total else ""
         post = ", ".join(f"{k}={v}" for k, v in self.postfix.items())
         head = f"{self.desc}: " if self.desc else ""
-        return (f"{head}{count} {self.unit}{percent} {self.clock() - self.start:.1f} s"
+        unit = f" {self.unit}" if self.unit else ""
+        return (f"{head}{count}{unit}{percent} {self.clock() - self.start:.1f} s"
                 + (f", {post}" if post else ""))
 
     def _print(self) -> None:

@@ -58,8 +58,8 @@ def read_blender(root: Path) -> Source:
             if needs_image_size(meta, frame):  # one size for all images (checked on decoding)
                 size = size or image_size(path)
             camera, distortion = frame_intrinsics(meta, frame, size, where)
-            frames.append(SourceFrame(camera=replace(camera, c2w=c2w_matrix(frame["transform_matrix"], where)),
-                                      image_path=path, split=split,
+            camera = replace(camera, c2w=c2w_matrix(frame["transform_matrix"], where))
+            frames.append(SourceFrame(camera=camera, image_path=path, split=split,
                                       distortion=None if distortion.is_identity else distortion))
     if not frames:
         raise UserError(f"{root}: the transforms_*.json files have an empty frame list")

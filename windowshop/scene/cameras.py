@@ -49,12 +49,6 @@ def opencv_w2c_to_gl_c2w(rot: np.ndarray, t: np.ndarray, where: str) -> np.ndarr
     return c2w @ CV_TO_GL
 
 
-def camera_from_fov(width: int, height: int, angle_x: float, c2w: np.ndarray) -> Camera:
-    """A centred pinhole camera with horizontal field of view `angle_x` (radians)."""
-    focal = 0.5 * width / np.tan(0.5 * angle_x)
-    return Camera(fx=focal, fy=focal, cx=width / 2, cy=height / 2, width=width, height=height, c2w=c2w)
-
-
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     """OpenGL camera-to-world (4, 4) of a camera at `eye` (3,) looking at `target` with `up`."""
     back = eye - target

@@ -8,7 +8,6 @@ from typing import Literal
 import numpy as np
 
 from windowshop.errors import UserError
-from windowshop.scene.types import Camera
 
 # OpenCV/COLMAP camera axes (x right, y down, z forward) -> OpenGL (x right, y up, z backward).
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])

@@ -38,8 +38,9 @@ def measure(name: str, command: list[str], code: Path | None) -> dict:
     """Run `command` in a child and report its peak RSS in MB, wall seconds and exit status."""
     env = dict(os.environ, **({"PYTHONPATH": str(code)} if code else {}))
     start = time.perf_counter()
+    # `python -m` puts the working folder first on the path: run in the code's own folder
     done = subprocess.run([sys.executable, "-c", WRAPPER, *command], capture_output=True, text=True,
-                          env=env)
+                          env=env, cwd=code)
     seconds = time.perf_counter() - start
     peak_kb = int(done.stderr.strip().splitlines()[-1].split()[1])
     result = {"job": name, "peak_rss_mb": round(peak_kb / 1024), "under_2gb": peak_kb / 1024 < LIMIT_MB,

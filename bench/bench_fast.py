@@ -231,7 +231,7 @@ def turntable(model, scene):
     with tempfile.TemporaryDirectory() as out:
         result = render_turntable(model, cameras, VideoOutputs(mp4=Path(out) / "turntable.mp4"),
                                   options.fps, display_background(scene.background),
-                                  chunk=options.chunk, progress=False)
+                                  memory_budget=options.memory_budget, progress=False)
     return result
 
 

@@ -11,6 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+# bytes of working memory one chunk of rays may take while training, evaluating or rendering
+# (windowshop/memory.py): with the interpreter and torch (~0.5 GB) a 100x100 job stays under 2 GB
+MEMORY_BUDGET = 512 * 2**20
+
 
 @dataclass(frozen=True)
 class SceneOptions:
@@ -116,7 +120,7 @@ class FitConfig:
     seed: int = 0  # random seed of the model's initialisation and the ray batches
     log_every: int = 50  # steps between lines of log.jsonl
     checkpoint_every: int = 1000  # steps between checkpoints (one is always written at the end)
-    eval_chunk: int = 8192  # rays rendered at once when evaluating
+    memory_budget: int = MEMORY_BUDGET  # bytes one chunk of rays may take (training steps, evaluation)
     # the final checkpoint keeps Adam's moments, so that --resume carries on where it stopped;
     # without them it is a third of the size (290 MB instead of 860 for a 4M-voxel real capture)
     # and is written and read in a third of the time (checkpoints of interrupted runs keep them)
@@ -137,7 +141,7 @@ class VideoOptions:
     start_angle: float = 0.0  # degrees of azimuth past the first training camera
     fov: float | None = None  # vertical, degrees; None: the photos' median, zoomed to frame the object
     spiral_amplitude: float = 15.0  # degrees the spiral swings above and below its elevation
-    chunk: int = 8192  # rays rendered at once (bounds memory at any resolution)
+    memory_budget: int = MEMORY_BUDGET  # bytes one chunk of rays may take (bounds memory at any size)
     full_turn: bool = False  # turn all the way round even when the photos cover under 300 degrees
     background: str = "white"  # "white", "black" or "transparent" (alpha: a .webm video, PNG images)
 

@@ -71,6 +71,12 @@ class RadianceModel(nn.Module):
         to the photos' resolution). The trainer calls this once; the run stores the result."""
         return config
 
+    def bytes_per_ray(self, training: bool) -> float:
+        """Working memory one ray of `render_rays` takes at most, in bytes: with autograd's saved
+        tensors when `training`. Chunks of rays are sized by it (windowshop/memory.py); this
+        default is a generous guess, models give their own."""
+        return 64 * 1024.0
+
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
                     background: torch.Tensor) -> RenderOutput:
         """Render rays `origins` (R, 3), unit `directions` (R, 3) over `background` (R, 3)."""

@@ -149,7 +149,9 @@ def test_chunked_rendering_matches_one_pass():
 
     model = NerfModel(TINY, Bounds.of_scene(toy_scene()))
     camera = toy_scene().views[0].camera
-    whole, chunked = render_camera(model, camera, chunk=10_000), render_camera(model, camera, chunk=7)
+    ray = model.bytes_per_ray(training=False)  # a budget of 7 rays: the 144 rays in 21 chunks
+    whole = render_camera(model, camera, memory_budget=int(10_000 * ray))
+    chunked = render_camera(model, camera, memory_budget=int(7 * ray))
     assert whole.rgb.shape == (12, 12, 3) and whole.depth.shape == (12, 12)
     assert np.allclose(whole.rgb, chunked.rgb, atol=1e-6)
     assert np.allclose(whole.opacity, chunked.opacity, atol=1e-6)
@@ -202,3 +204,27 @@ def test_fit_command_seconds_replace_the_step_budget(tmp_path, monkeypatch):
         fit_command("toy", {"model": "nerf", "depth": 2.5}, str(tmp_path / "y"), None, "cpu")
     with pytest.raises(UserError, match="resumed run keeps its model"):
         fit_command(None, {"width": 8}, None, str(tmp_path), "cpu")
+
+
+def test_a_batch_over_the_memory_budget_gets_the_gradient_of_one_pass():
+    from types import SimpleNamespace
+
+    from windowshop.field.nerf import NerfModel
+    from windowshop.fit.losses import loss_terms
+    from windowshop.fit.trainer import _backward_in_chunks
+    from windowshop.model import Bounds
+
+    torch.manual_seed(0)
+    model = NerfModel(TINY, Bounds.of_scene(toy_scene())).eval()  # eval: no jitter, same samples
+    origins, directions = camera_rays(toy_scene().views[0].camera)
+    bg, target = torch.ones_like(origins), torch.rand_like(origins)
+    grads = []
+    for rays_per_chunk in (10_000, 7):  # one pass, then 21 chunks
+        budget = int(rays_per_chunk * model.bytes_per_ray(training=True))
+        run = SimpleNamespace(model=model, config=FitConfig(memory_budget=budget),
+                              losses=loss_terms(model.config), virtual=None)
+        model.zero_grad(set_to_none=True)
+        loss, error, samples = _backward_in_chunks(run, origins, directions, bg, target)
+        grads.append(torch.cat([p.grad.flatten() for p in model.parameters()]))
+        assert samples == 144 * TINY.n_coarse
+    assert torch.allclose(grads[0], grads[1], atol=1e-6, rtol=1e-4)

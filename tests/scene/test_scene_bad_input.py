@@ -109,10 +109,10 @@ def test_broken_json(tmp_path):
         load_scene(tmp_path)
 
 
-def test_fisheye_is_refused(tmp_path):
+def test_an_unsupported_camera_model_is_refused(tmp_path):
     frames, meta = _scene(tmp_path)
-    with pytest.raises(UserError, match="fisheye"):
-        load_scene(_write(tmp_path, frames, camera_model="OPENCV_FISHEYE", **meta))
+    with pytest.raises(UserError, match="EQUIRECTANGULAR is not supported"):
+        load_scene(_write(tmp_path, frames, camera_model="EQUIRECTANGULAR", **meta))
 
 
 def test_too_many_views(tmp_path):

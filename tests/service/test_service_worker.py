@@ -283,6 +283,8 @@ def test_service_settings_reach_the_pipeline(monkeypatch, tmp_path):
     with pytest.raises(UserError, match="fit.iters may be at most"):
         job_config(ServiceSettings(job=PipelineConfig(fit=FitConfig(iters=50, seconds=None))),
                    {"seconds": 5})  # a time budget would lift the service's step cap
+    with pytest.raises(UserError, match="render.memory_budget may be at most"):
+        job_config(settings, {"render.memory_budget": 64 * 2**30})  # memory is the service's too
     with pytest.raises(UserError, match="must be an integer"):
         job_config(settings, {"render.frames": "many"})
     with pytest.raises(UserError, match="MP4 turntables, which have no alpha"):

@@ -59,9 +59,10 @@ def test_sphere_stays_centred_and_the_same_size_in_every_frame(tmp_path):
     done = []
     result = render_turntable(model, cameras, VideoOutputs(mp4=tmp_path / "s.mp4",
                                                            depth=tmp_path / "d.mp4"),
-                              fps=10, chunk=500, progress=False,
+                              fps=10, memory_budget=int(500 * model.bytes_per_ray(training=False)),
+                              progress=False,
                               on_frame=lambda k, n: done.append((k, n)))
-    assert model.largest_batch == 500  # frames of 3072 rays were rendered 500 at a time
+    assert model.largest_batch == 500  # frames of 3072 rays were rendered 500 at a time (the budget's worth)
     assert done == [(k, 10) for k in range(1, 11)]
     assert result.frames == 10 and result.files == [tmp_path / "s.mp4", tmp_path / "d.mp4"]
     _, frames = read_video(tmp_path / "s.mp4")

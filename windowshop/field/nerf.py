@@ -11,11 +11,17 @@ from torch import nn
 
 from windowshop.config import NERF_PRESETS, NerfConfig
 from windowshop.field.encoding import PositionalEncoding
+from windowshop.memory import per_chunk
 from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.composite import Composite, composite
 from windowshop.render.sampling import hierarchical, stratified
 
-POINT_CHUNK = 1 << 16  # field evaluations at once when rendering without gradients
+# floats per sample beyond the MLP's activations: points, directions, densities, colours and the
+# compositing's (R, N) tensors
+SAMPLE_OVERHEAD = 32
+# autograd keeps about the activations counted (12.3 of the 12.9 kB counted a sample for the seed's
+# 8 x 256 MLP: tests/test_memory.py); the backward pass adds its own temporaries on top
+GRAD_FACTOR = 1.5
 # raw output -> density >= 0. ReLU as the paper; a field whose densities all go negative early
 # (a dark background makes "nothing anywhere" a strong pull) stops learning, softplus cannot.
 DENSITY_ACTIVATIONS = {"relu": torch.relu, "softplus": torch.nn.functional.softplus}
@@ -47,6 +53,16 @@ class NerfField(nn.Module):
         else:
             self.head = nn.Linear(width, 4)
 
+    def bytes_per_sample(self, training: bool) -> float:
+        """Memory one point's evaluation takes: every activation autograd keeps when `training`
+        (the encodings, a W-wide output per layer, the skip's concatenation, the colour branch),
+        else the widest few alive at once."""
+        n_in, n_dir, width = self.encode_pos.out_dims, self.encode_dir.out_dims, self.config.width
+        if not training:
+            return 4.0 * (n_in + 3 * width + n_dir + SAMPLE_OVERHEAD)
+        floats = 2 * n_in + (self.config.depth + 4) * width + 2 * n_dir + SAMPLE_OVERHEAD
+        return 4.0 * GRAD_FACTOR * floats
+
     def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Density (N,) >= 0 and colour (N, 3) in [0, 1] at points `x` (N, 3) seen along unit `d` (N, 3)."""
         inputs = self.encode_pos(x)
@@ -64,11 +80,13 @@ class NerfField(nn.Module):
 
 
 def _query(field: NerfField, points: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """`field` at `points`, `dirs` (P, 3); without autograd in slices of POINT_CHUNK points, so
-    rendering holds a few (POINT_CHUNK, W) activations at a time however many rays it is given."""
-    if torch.is_grad_enabled() or points.shape[0] <= POINT_CHUNK:
+    """`field` at `points`, `dirs` (P, 3); without autograd in slices within the default memory
+    budget, so `density` and `colour` hold a bounded set of activations however many points they
+    are given (rendering's chunks of rays are already sized to fit)."""
+    chunk = per_chunk(field.bytes_per_sample(training=False))
+    if torch.is_grad_enabled() or points.shape[0] <= chunk:
         return field(points, dirs)
-    parts = [field(p, d) for p, d in zip(points.split(POINT_CHUNK), dirs.split(POINT_CHUNK))]
+    parts = [field(p, d) for p, d in zip(points.split(chunk), dirs.split(chunk))]
     return torch.cat([sigma for sigma, _ in parts]), torch.cat([rgb for _, rgb in parts])
 
 
@@ -94,6 +112,11 @@ class NerfModel(RadianceModel):
         dirs = directions[:, None, :].expand_as(points)
         sigma, rgb = _query(field, points.reshape(-1, 3), dirs.reshape(-1, 3))
         return composite(sigma.view(-1, n), rgb.view(-1, n, 3), t, far, background)
+
+    def bytes_per_ray(self, training: bool) -> float:
+        """N_c coarse samples, and N_c + N_f fine ones, each as `NerfField.bytes_per_sample`."""
+        samples = self.config.n_coarse + (self.config.n_coarse + self.config.n_fine if self.fine else 0)
+        return samples * self.coarse.bytes_per_sample(training)
 
     def render_rays(self, origins: torch.Tensor, directions: torch.Tensor,
                     background: torch.Tensor) -> RenderOutput:

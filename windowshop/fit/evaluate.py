@@ -16,6 +16,7 @@ import numpy as np
 from PIL import Image
 
 from windowshop.fit.checkpoint import METRICS, load_run
+from windowshop.memory import MEMORY_BUDGET
 from windowshop.metrics import psnr, ssim
 from windowshop.model import RadianceModel
 from windowshop.render.frames import display_background, render_camera
@@ -50,8 +51,8 @@ def image_name(index: int, view: View) -> str:
     return f"{index:03d}_{re.sub(r'[^A-Za-z0-9_-]+', '_', name)}.png"
 
 
-def evaluate_views(model: RadianceModel, views: list[View], background: str, chunk: int = 8192,
-                   image_dir: Path | None = None) -> dict:
+def evaluate_views(model: RadianceModel, views: list[View], background: str,
+                   memory_budget: int = MEMORY_BUDGET, image_dir: Path | None = None) -> dict:
     """Render `views`, measure them, and write one comparison PNG per view into `image_dir`.
 
     Returns {"psnr", "ssim" (means over views; None without views), "test_views", "per_view",
@@ -62,7 +63,7 @@ def evaluate_views(model: RadianceModel, views: list[View], background: str, chu
     start, per_view = time.perf_counter(), []
     for index, view in enumerate(views):
         truth = target_image(view, background)
-        frame = render_camera(model, view.camera, display_background(background), chunk)
+        frame = render_camera(model, view.camera, display_background(background), memory_budget)
         per_view.append({"name": view.name, "psnr": psnr(frame.rgb, truth), "ssim": ssim(frame.rgb, truth)})
         if image_dir is not None:
             Image.fromarray(comparison_image(truth, frame.rgb)).save(image_dir / image_name(index, view))
@@ -107,7 +108,7 @@ def evaluate_run(run_dir: str | Path, device, scene: Scene | None = None) -> dic
     if scene is None:
         scene = load_scene(run.scene_source, run.scene_options)
     results = evaluate_views(run.model, held_out_views(scene), run.background,
-                             run.fit_config.eval_chunk, run_dir / EVAL_DIR)
+                             run.fit_config.memory_budget, run_dir / EVAL_DIR)
     metrics = {**results, "model": run.model_name, "train_seconds": run.elapsed_seconds,
                "iterations": run.step}
     write_metrics(run_dir, metrics)

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from windowshop.config import FitConfig
 from windowshop.device import ThreadTuner
@@ -35,8 +34,10 @@ from windowshop.fit.checkpoint import LOG, load_checkpoint, save_checkpoint, sce
 from windowshop.fit.evaluate import EVAL_DIR, evaluate_views, held_out_views, write_metrics
 from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
 from windowshop.fit.schedule import Hook, StepInfo, schedule_for
+from windowshop.memory import spans
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
+from windowshop.progress import bar as progress_bar
 from windowshop.scene.hull import carve_mask
 from windowshop.scene.types import BACKGROUNDS, Camera, Scene
 
@@ -139,7 +140,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         raise UserError(f"interrupted at step {progress.step}; carry on with --resume {out_dir}")
     run.checkpoint(final=True)
     results = evaluate_views(model, held_out_views(scene), scene.background,
-                             fit_config.eval_chunk, out_dir / EVAL_DIR)
+                             fit_config.memory_budget, out_dir / EVAL_DIR)
     metrics = {**results, "model": model_name, "train_seconds": progress.elapsed,
                "iterations": progress.step}
     write_metrics(out_dir, metrics)
@@ -200,21 +201,40 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     rays = config.batch_rays or model.batch_rays
     batch = bank.sample(rays)
     bg = _backgrounds(background, rays, bank.device)
-    target = batch.target(bg)
-    out = model.render_rays(batch.origins, batch.directions, bg)
-    loss = total_loss(run.losses, LossInput(model, out, target, bg, run.virtual))
     optimizer.zero_grad(set_to_none=True)
-    loss.backward()
+    loss, error, samples = _backward_in_chunks(run, batch.origins, batch.directions, bg, batch.target(bg))
     optimizer.step()
     for hook in run.schedule:
         hook.after_step(info)
-    error = float(torch.mean((out.rgb.detach() - target) ** 2))  # syncs, so the timing is true
+    error = float(error)  # syncs, so the timing is true
     seconds = time.perf_counter() - start
     progress.step += 1
     progress.elapsed += seconds
-    return {"step": progress.step, "loss": float(loss.detach()), "psnr": psnr_of_mse(error), "seconds": seconds,
+    return {"step": progress.step, "loss": float(loss), "psnr": psnr_of_mse(error), "seconds": seconds,
             "lr": optimizer.param_groups[0]["lr"], "rays_per_s": rays / seconds,
-            "samples_per_s": out.num_samples / seconds, "elapsed": progress.elapsed}
+            "samples_per_s": samples / seconds, "elapsed": progress.elapsed}
+
+
+def _backward_in_chunks(run: TrainingRun, origins: torch.Tensor, directions: torch.Tensor,
+                        bg: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Render the batch `origins`, `directions`, `bg`, `target` (R, 3) and back-propagate its loss,
+    in chunks of rays within `run.config.memory_budget` (autograd keeps every activation of a
+    chunk until its backward pass). Each chunk's loss is weighted by its share of the rays, so the
+    summed gradients are those of the whole batch's mean losses. Returns the loss and the colour's
+    mean squared error (scalar tensors) and the number of samples."""
+    rays = origins.shape[0]
+    loss_sum = torch.zeros((), device=origins.device)
+    squared = torch.zeros((), device=origins.device)
+    samples = 0
+    for span in spans(rays, run.model.bytes_per_ray(training=True), run.config.memory_budget):
+        out = run.model.render_rays(origins[span], directions[span], bg[span])
+        share = (span.stop - span.start) / rays
+        loss = share * total_loss(run.losses, LossInput(run.model, out, target[span], bg[span], run.virtual))
+        loss.backward()
+        loss_sum += loss.detach()
+        squared += torch.sum((out.rgb.detach() - target[span]) ** 2)
+        samples += int(out.num_samples)
+    return loss_sum, squared / target.numel(), samples
 
 
 def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bool) -> None:
@@ -223,8 +243,7 @@ def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bo
     config, progress = run.config, run.progress
     run.model.train()
     total = config.iters if config.iters and not config.seconds else None
-    bar = tqdm(total=total, initial=progress.step, disable=not show_progress, unit="step",
-               dynamic_ncols=True)
+    bar = progress_bar(total=total, desc="fit", unit="step", initial=progress.step, show=show_progress)
     tuner = ThreadTuner(bank.device)
     with open(run.out_dir / LOG, "a") as log, bar, contextlib.closing(tuner):
         while progress.fraction(config) < 1.0:

@@ -1,4 +1,4 @@
-"""Stages of a long job, shown as lines and tqdm bars on stderr and reported to a callback.
+"""Stages of a long job, shown as lines and progress bars on stderr and reported to a callback.
 
 The callback (`on_stage(stage, fraction)`) is how the web service follows a job; the bars are
 for a person at a terminal. Each stage's duration is kept for the report and the benchmark.
@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from tqdm import tqdm
+from windowshop.progress import bar as progress_bar
 
 StageCallback = Callable[[str, float], None]
 
@@ -40,8 +40,8 @@ class Stages:
         """Run one stage; `total` steps draws a bar (None: a line only)."""
         share = self.fractions.get(name, 0.0)
         start = time.perf_counter()
-        bar = tqdm(total=total, desc=name, unit="", leave=False, file=sys.stderr,
-                   disable=not self.show or total is None, dynamic_ncols=True)
+        bar = progress_bar(total=total, desc=name, unit="", leave=False,
+                           show=self.show and total is not None)
         count = 0
 
         def advance(n: int = 1) -> None:

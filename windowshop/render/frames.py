@@ -1,6 +1,7 @@
 """Whole images from any `RadianceModel`: rays of a camera rendered in chunks, without gradients.
 
-Memory is bounded by `chunk` rays at a time whatever the image size; results come back as numpy.
+Memory is bounded by a budget in bytes whatever the image size: each chunk holds as many rays as
+the model's `bytes_per_ray` lets fit in it (windowshop/memory.py). Results come back as numpy.
 Pixels are rendered tile by tile: neighbouring rays read the same grid cells, which then stay in
 the CPU's caches (1.3-1.5x faster than row by row on a 256x256 turntable frame of a real capture).
 """
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from windowshop.memory import MEMORY_BUDGET, spans
 from windowshop.model import RadianceModel
 from windowshop.rays import camera_rays
 from windowshop.scene.types import BACKGROUNDS, Camera
@@ -40,9 +42,10 @@ def model_device(model: torch.nn.Module) -> torch.device:
 
 @torch.no_grad()
 def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions: torch.Tensor,
-                        background: torch.Tensor, chunk: int = 8192
+                        background: torch.Tensor, memory_budget: int = MEMORY_BUDGET
                         ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Render rays `origins`, `directions` (R, 3) over `background` (3,) in chunks of `chunk` rays.
+    """Render rays `origins`, `directions` (R, 3) over `background` (3,) in chunks of rays that
+    each take at most `memory_budget` bytes.
 
     Returns rgb (R, 3), depth (R,), opacity (R,) on the rays' device. Switches the model to eval
     mode (deterministic samples) for the call and restores its previous mode.
@@ -51,8 +54,8 @@ def render_rays_chunked(model: RadianceModel, origins: torch.Tensor, directions:
     model.eval()
     try:
         parts = []
-        for start in range(0, origins.shape[0], chunk):
-            o, d = origins[start:start + chunk], directions[start:start + chunk]
+        for span in spans(origins.shape[0], model.bytes_per_ray(training=False), memory_budget):
+            o, d = origins[span], directions[span]
             out = model.render_rays(o, d, background.expand(o.shape[0], 3))
             parts.append((out.rgb, out.depth, out.opacity))
     finally:
@@ -74,13 +77,13 @@ def tile_order(height: int, width: int, tile: int = TILE) -> torch.Tensor:
 
 def render_camera(model: RadianceModel, camera: Camera,
                   background: tuple[float, float, float] = (1.0, 1.0, 1.0),
-                  chunk: int = 8192) -> Frame:
+                  memory_budget: int = MEMORY_BUDGET) -> Frame:
     """Render every pixel of `camera` (in the model's normalised frame) on the model's device."""
     device = model_device(model)
     origins, directions = camera_rays(camera, device=device)
     order = tile_order(camera.height, camera.width).to(device)
     bg = torch.tensor(background, dtype=torch.float32, device=device)
-    tiled = render_rays_chunked(model, origins[order], directions[order], bg, chunk)
+    tiled = render_rays_chunked(model, origins[order], directions[order], bg, memory_budget)
     rgb, depth, opacity = (torch.empty_like(v).index_copy_(0, order, v) for v in tiled)
     shape = (camera.height, camera.width)
     return Frame(rgb=rgb.clamp(0, 1).reshape(*shape, 3).cpu().numpy(),

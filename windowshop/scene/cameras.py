@@ -8,7 +8,6 @@ from typing import Literal
 import numpy as np
 
 from windowshop.errors import UserError
-from windowshop.scene.types import Camera
 
 # OpenCV/COLMAP camera axes (x right, y down, z forward) -> OpenGL (x right, y up, z backward).
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -47,12 +46,6 @@ def opencv_w2c_to_gl_c2w(rot: np.ndarray, t: np.ndarray, where: str) -> np.ndarr
     c2w[:3, :3] = rot.T
     c2w[:3, 3] = -rot.T @ np.asarray(t, dtype=np.float64)
     return c2w @ CV_TO_GL
-
-
-def camera_from_fov(width: int, height: int, angle_x: float, c2w: np.ndarray) -> Camera:
-    """A centred pinhole camera with horizontal field of view `angle_x` (radians)."""
-    focal = 0.5 * width / np.tan(0.5 * angle_x)
-    return Camera(fx=focal, fy=focal, cx=width / 2, cy=height / 2, width=width, height=height, c2w=c2w)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

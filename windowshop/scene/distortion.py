@@ -1,4 +1,5 @@
-"""Lens distortion (OpenCV radial-tangential, as COLMAP and nerfstudio write it) and undistortion.
+"""Lens distortion (OpenCV radial-tangential, and OpenCV's equidistant fisheye, as COLMAP and
+nerfstudio write them) and undistortion.
 
 Images are undistorted on load: every output pixel of an ideal pinhole camera is mapped through
 the forward distortion model into the stored image and sampled bilinearly, so no model inverse
@@ -17,7 +18,12 @@ from windowshop.scene.types import Camera
 
 @dataclass(frozen=True)
 class Distortion:
-    """radial = 1 + k1 r^2 + k2 r^4 + k3 r^6 + k4 r^8, plus tangential p1, p2 (OpenCV order)."""
+    """radial = 1 + k1 r^2 + k2 r^4 + k3 r^6 + k4 r^8, plus tangential p1, p2 (OpenCV order).
+
+    `fisheye` (OpenCV's fisheye model, COLMAP's OPENCV_FISHEYE / RADIAL_FISHEYE): the ray at angle
+    theta = atan(r) off the axis lands at radius theta (1 + k1 theta^2 + ... + k4 theta^8); p1, p2
+    are unused. A fisheye is never the identity, even with every k zero (equidistant, not pinhole).
+    """
 
     k1: float = 0.0
     k2: float = 0.0
@@ -25,17 +31,30 @@ class Distortion:
     k4: float = 0.0
     p1: float = 0.0
     p2: float = 0.0
+    fisheye: bool = False
 
     @property
     def is_identity(self) -> bool:
         return not any(asdict(self).values())
 
     def as_dict(self) -> dict[str, float]:
-        return {k: float(v) for k, v in asdict(self).items()}
+        """The non-zero terms (and `fisheye: 1.0` for a fisheye) as floats."""
+        return {k: float(v) for k, v in asdict(self).items() if v}
+
+
+def _distort_fisheye(xy: np.ndarray, d: Distortion) -> np.ndarray:
+    r = np.linalg.norm(xy, axis=-1)
+    theta = np.arctan(r)
+    t2 = theta * theta
+    theta_d = theta * (1.0 + t2 * (d.k1 + t2 * (d.k2 + t2 * (d.k3 + t2 * d.k4))))
+    scale = np.where(r > 1e-12, theta_d / np.maximum(r, 1e-12), 1.0)  # theta_d / r -> 1 at the axis
+    return xy * scale[:, None]
 
 
 def distort(xy: np.ndarray, d: Distortion) -> np.ndarray:
     """Distorted normalised coordinates (N, 2) of ideal ones `xy` (N, 2), OpenCV axes (y down)."""
+    if d.fisheye:
+        return _distort_fisheye(xy, d)
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
     radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * (d.k3 + r2 * d.k4)))
@@ -63,7 +82,8 @@ def undistorted_camera(stored: Camera, d: Distortion) -> Camera:
     """The pinhole camera (same size and centre) whose every pixel samples inside `stored`.
 
     Its focal lengths are the stored ones times the smallest zoom (found by bisection) for which
-    the image border maps inside the stored image.
+    the image border maps inside the stored image. A fisheye may need a much wider pinhole (its
+    edge rays may be far off the axis), so its search starts lower.
     """
     border = _border_pixels(stored.width, stored.height)
 
@@ -74,7 +94,7 @@ def undistorted_camera(stored: Camera, d: Distortion) -> Camera:
         return bool(np.all((src[:, 0] >= -eps) & (src[:, 0] <= stored.width + eps)
                            & (src[:, 1] >= -eps) & (src[:, 1] <= stored.height + eps)))
 
-    lo, hi = 0.5, 2.0
+    lo, hi = (0.05 if d.fisheye else 0.5), 2.0
     if inside(lo):
         return replace(stored, fx=stored.fx * lo, fy=stored.fy * lo)
     for _ in range(40):

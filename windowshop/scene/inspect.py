@@ -28,7 +28,7 @@ def summary_dict(scene: Scene) -> dict:
         if view.distortion:
             entry["distortion"] = view.distortion
         views.append(entry)
-    return {"format": scene.format, "source": str(scene.source), "views": views,
+    return {"format": scene.format, "source": str(scene.source), "notes": list(scene.notes), "views": views,
             "background": scene.background,
             "bounds": {"aabb": np.asarray(scene.aabb).tolist(), "near": scene.near, "far": scene.far},
             "transform": scene.transform.tolist()}
@@ -59,7 +59,7 @@ def summary_text(scene: Scene) -> str:
         f"  near {scene.near:.3f}  far {scene.far:.3f} (normalised frame)",
         f"normalise:   scale {scene.scale:.4g} (normalised units per source unit)",
     ]
-    return "\n".join(lines)
+    return "\n".join(lines + [f"read:        {note}" for note in scene.notes])
 
 
 def inspect_command(path: str, options: SceneOptions, as_json: bool = False,

@@ -153,7 +153,7 @@ def build_scene(source: Source, options: SceneOptions) -> Scene:
     near, far = normalize.near_far(np.stack([v.camera.center for v in views]), aabb)
     return Scene(views=views, format=source.format, source=source.path, aabb=aabb, near=near,
                  far=far, transform=transform, background=_background(source, views, options),
-                 options=options)
+                 options=options, notes=tuple(source.notes))
 
 
 def _background(source: Source, views: list[View], options: SceneOptions) -> str:

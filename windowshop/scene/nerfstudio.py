@@ -1,9 +1,16 @@
 """nerfstudio / instant-ngp `transforms.json`: OpenGL c2w per frame, intrinsics global or per
-frame (`fl_x fl_y cx cy w h`, or `camera_angle_x`), OpenCV distortion, optional `mask_path`,
-optional `{train,val,test}_filenames` splits."""
+frame (scene/intrinsics.py: `fl_x fl_y cx cy w h`, fields of view, OPENCV or OPENCV_FISHEYE
+lenses), optional `mask_path` (frames whose mask file is missing leave every mask out, with a
+warning), optional `{train,val,test}_filenames` splits, the `images_N/` copies ns-process-data writes
+(decoded instead when the scene is loaded downscaled), optional `ply_file_path` (nerfstudio's sparse
+points, in the file's frame: they bound the object; a missing one is noted and skipped).
+`depth_file_path`, `applied_transform`
+(how nerfstudio moved COLMAP's frame: the poses already carry it) and instant-ngp's `aabb_scale`,
+`scale`, `offset` are not needed and left alone."""
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -13,40 +20,16 @@ import numpy as np
 from windowshop.errors import UserError
 from windowshop.scene.blender import image_file, read_json
 from windowshop.scene.cameras import c2w_matrix
-from windowshop.scene.distortion import Distortion
 from windowshop.scene.images import image_size
+from windowshop.scene.intrinsics import frame_intrinsics, needs_image_size
+from windowshop.scene.ply import read_ply_points
 from windowshop.scene.source import Source, SourceFrame
-from windowshop.scene.types import SPLITS, Camera
+from windowshop.scene.types import SPLITS
 
-DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
-SIZE_KEYS = ("w", "h", "fl_x", "fl_y", "cx", "cy", "camera_angle_x")
+log = logging.getLogger(__name__)
+
 WRITER_KEY = "windowshop"  # extra key our writer adds: normalisation, box and background
-
-
-def _intrinsics(meta: dict, frame: dict, size: tuple[int, int], where: str) -> tuple[Camera, Distortion]:
-    """The frame's camera (identity pose) and distortion: per-frame keys override global ones.
-
-    `size` (width, height) is used when neither the frame nor the file gives `w` and `h`.
-    """
-    def get(key: str):
-        return frame.get(key, meta.get(key))
-
-    if get("camera_model") == "OPENCV_FISHEYE" or get("is_fisheye"):
-        raise UserError(f"{where}: fisheye cameras are not supported; undistort the images "
-                        f"(e.g. with COLMAP's image_undistorter) and pass the pinhole result")
-    width = int(round(get("w") or size[0]))
-    height = int(round(get("h") or size[1]))
-    fx = get("fl_x")
-    if fx is None:
-        if get("camera_angle_x") is None:
-            raise UserError(f"{where}: no focal length: give 'fl_x' (pixels) or 'camera_angle_x'")
-        fx = 0.5 * width / np.tan(0.5 * float(get("camera_angle_x")))
-    fy = get("fl_y") or fx
-    cx, cy = get("cx"), get("cy")
-    camera = Camera(fx=float(fx), fy=float(fy), cx=width / 2 if cx is None else float(cx),
-                    cy=height / 2 if cy is None else float(cy), width=width, height=height,
-                    c2w=np.eye(4))
-    return camera, Distortion(**{k: float(get(k) or 0.0) for k in DISTORTION_KEYS})
+PRESCALED = (2, 4, 8)  # ns-process-data's downscaled copies: images_2/, images_4/, images_8/
 
 
 def _splits(meta: dict) -> dict[str, str]:
@@ -70,18 +53,51 @@ def read_nerfstudio(path: Path) -> Source:
         if "file_path" not in frame or "transform_matrix" not in frame:
             raise UserError(f"{where}: every frame needs 'file_path' and 'transform_matrix'")
         image = image_file(root, frame["file_path"])
-        if any(k in frame for k in ("w", "h")):
-            size = (0, 0)
-        else:  # global intrinsics: one image size for all (a mismatch is reported on decoding)
-            global_size = global_size or image_size(image)
-            size = global_size
-        camera, distortion = _intrinsics(meta, frame, size, f"{where} ({image.name})")
+        size = None
+        if needs_image_size(meta, frame):  # one image size for all (a mismatch is reported on decoding)
+            global_size = size = global_size or image_size(image)
+        camera, distortion = frame_intrinsics(meta, frame, size, f"{where} ({image.name})")
         mask = root / frame["mask_path"] if frame.get("mask_path") else None
         frames.append(SourceFrame(
             camera=replace(camera, c2w=c2w_matrix(frame["transform_matrix"], where)),
             image_path=image, split=splits.get(os.path.normpath(frame["file_path"])),
-            distortion=None if distortion.is_identity else distortion, mask_path=mask))
+            distortion=None if distortion.is_identity else distortion, mask_path=mask,
+            prescaled=_prescaled(image)))
     extra = meta.get(WRITER_KEY) or {}
     box = np.asarray(extra["aabb"], dtype=np.float64) if "aabb" in extra else None
-    return Source(format="nerfstudio", path=path, frames=frames, box=box,
-                  background=extra.get("background"), normalized="transform" in extra)
+    notes: list[str] = []
+    return Source(format="nerfstudio", path=path, frames=_masks_or_none(frames, path, notes), box=box,
+                  background=extra.get("background"), normalized="transform" in extra,
+                  points=_points(meta, root, notes), notes=notes)
+
+
+def _prescaled(image: Path) -> dict[int, Path]:
+    """factor -> nerfstudio's downscaled copy of `image`, in `images_N/` beside its `images/`."""
+    if image.parent.name != "images":
+        return {}
+    copies = {f: image.parent.with_name(f"images_{f}") / image.name for f in PRESCALED}
+    return {f: path for f, path in copies.items() if path.is_file()}
+
+
+def _points(meta: dict, root: Path, notes: list[str]) -> np.ndarray | None:
+    """The sparse points of `ply_file_path`, if the file names one and it exists."""
+    if not meta.get("ply_file_path"):
+        return None
+    path = root / meta["ply_file_path"]
+    if not path.is_file():
+        notes.append(f"{path}: the point cloud ply_file_path names is missing, not used")
+        return None
+    points = read_ply_points(path)
+    notes.append(f"{path}: {len(points)} points")
+    return points
+
+
+def _masks_or_none(frames: list[SourceFrame], path: Path, notes: list[str]) -> list[SourceFrame]:
+    """`frames`, without masks when any frame's mask file is missing (a scene is masked or not)."""
+    missing = [f.mask_path for f in frames if f.mask_path is not None and not f.mask_path.is_file()]
+    if not missing:
+        return frames
+    log.warning("%s: %d mask file(s) missing (first %s); every mask is left out", path,
+                len(missing), missing[0])
+    notes.append(f"{len(missing)} mask file(s) missing (first {missing[0]}): no masks used")
+    return [replace(f, mask_path=None) for f in frames]

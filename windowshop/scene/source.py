@@ -40,3 +40,5 @@ class Source:
     background: str | None = None  # the background of images without alpha ("black"), if known
     up: np.ndarray | None = None  # (3,) the world's published up direction, if the format fixes one
     normalized: bool = False  # the frame is already a windowshop normalised frame (our writer's)
+    # what the reader used, or left out, besides its main file, in words (`inspect` shows them)
+    notes: list[str] = field(default_factory=list)

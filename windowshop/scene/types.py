@@ -104,6 +104,7 @@ class Scene:
     # How the source was loaded (windowshop.config.SceneOptions), so a run that records it reloads
     # the scene exactly as it was trained on.
     options: Any = None
+    notes: tuple[str, ...] = ()  # the reader's: which files it used or left out, in words
 
     def split(self, name: str) -> list[View]:
         """The views of one split, in order."""

@@ -102,7 +102,8 @@ def pipeline_input(folder: Path) -> Path:
 
 # Settings an upload may only lower: the service's own values bound each job's time and size.
 CAPPED = ("fit.seconds", "fit.iters", "deadline", "scene.max_side", "prepare.max_side",
-          "render.frames", "render.width", "render.height")
+          "render.frames", "render.width", "render.height", "fit.memory_budget",
+          "render.memory_budget")
 JOB_CONFIG = "job.json"  # in the job's folder: its PipelineConfig when the upload chose settings
 
 

@@ -17,12 +17,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from windowshop.config import VideoOptions
 from windowshop.device import ThreadTuner
 from windowshop.errors import UserError
+from windowshop.memory import MEMORY_BUDGET
 from windowshop.model import Bounds, RadianceModel
+from windowshop.progress import bar as progress_bar
 from windowshop.scene.cameras import box_corners
 from windowshop.scene.types import BACKGROUNDS, Camera
 from windowshop.video.encode import TurntableWriter, VideoOutputs
@@ -71,14 +72,16 @@ def depth_range(cameras: list[Camera], bounds: Bounds) -> tuple[float, float]:
 
 
 def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: VideoOutputs, fps: float,
-                     background: tuple[float, float, float] = (1.0, 1.0, 1.0), chunk: int = 8192,
+                     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                     memory_budget: int = MEMORY_BUDGET,
                      progress: bool = True,
                      on_frame: Callable[[int, int], None] | None = None) -> TurntableResult:
     """Render `cameras` (one size) with `model` on its device and write every requested output.
 
-    Each frame is rendered `chunk` rays at a time and handed to the writers at once, so memory
-    stays bounded at any resolution and length. `on_frame(done, total)` reports progress (the
-    web service's jobs); `progress` shows a tqdm bar on stderr.
+    Each frame is rendered in chunks of rays within `memory_budget` bytes and handed to the
+    writers at once, so memory stays bounded at any resolution and length. `on_frame(done,
+    total)` reports progress (the web service's jobs); `progress` shows a bar on stderr (plain
+    lines when it is not a terminal).
     """
     from windowshop.render.frames import model_device, render_camera
 
@@ -92,10 +95,10 @@ def render_turntable(model: RadianceModel, cameras: list[Camera], outputs: Video
     tuner = ThreadTuner(model_device(model), trial_steps=2)  # ffmpeg takes a core too
     with TurntableWriter(outputs, width, height, fps, depth_range(cameras, model.bounds)) as writer, \
             contextlib.closing(tuner):
-        for k, camera in enumerate(tqdm(cameras, desc="render", unit="frame", disable=not progress)):
+        for k, camera in enumerate(progress_bar(cameras, desc="render", unit="frame", show=progress)):
             tuner.before_step()
             began = time.perf_counter()
-            frame = render_camera(model, camera, background=background, chunk=chunk)
+            frame = render_camera(model, camera, background=background, memory_budget=memory_budget)
             writer.add(frame.rgb, frame.depth, frame.opacity)
             tuner.after_step(time.perf_counter() - began)
             if on_frame is not None:
@@ -125,7 +128,8 @@ def render_run(run_dir: str | Path, options: VideoOptions, outputs: VideoOutputs
     outputs = dataclasses.replace(outputs, poster_frame=poster,
                                   transparent=options.background == "transparent")
     result = render_turntable(run.model, plan.cameras, outputs, options.fps,
-                              background=VIDEO_BACKGROUNDS[options.background], chunk=options.chunk,
+                              background=VIDEO_BACKGROUNDS[options.background],
+                              memory_budget=options.memory_budget,
                               progress=progress, on_frame=on_frame)
     result = dataclasses.replace(result, path={**plan.summary(), "poster_frame": poster},
                                  background=options.background)

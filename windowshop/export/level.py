@@ -3,8 +3,8 @@
 A density field has no surface of its own; the one that matters is the one whose outline is the
 object's outline in the photos. A training view's silhouette is where the field's accumulated
 opacity passes one half (its transmittance, which is what the masks trained it to); an iso-surface
-at level L covers the pixels onto which some density above L projects. So each pixel's peak
-density is found once (the lattice splatted into the view), and the level is the one whose
+at level L covers the pixels whose ray meets a density above L. So each ray's peak density is
+read once (from a coarse copy of the lattice), and the level is the one whose
 silhouettes agree best (IoU) with the field's own, over a few training views.
 """
 
@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from windowshop.model import RadianceModel
 from windowshop.rays import camera_rays
 from windowshop.scene.types import Camera
 
 COARSE = 128  # the level is chosen on a lattice of at most this many cells a side
-FLOOR_ALPHA = 0.01  # no surface where a whole coarse cell is less opaque than this
 LEVELS = 96  # candidate levels, spaced evenly in log density
 CELLS_PER_PIXEL = 2.0  # pixels of the views that choose the level, in lattice cells
 PLATEAU = 2e-3  # levels this close to the best IoU count as equally good (middle one taken)
@@ -49,25 +49,22 @@ def field_silhouette(model: RadianceModel, camera: Camera, chunk: int = 16384) -
 
 
 @torch.no_grad()
-def peak_density(volume: torch.Tensor, aabb: torch.Tensor, camera: Camera,
-                 floor: float) -> torch.Tensor:
+def peak_density(volume: torch.Tensor, aabb: torch.Tensor, camera: Camera) -> torch.Tensor:
     """(H*W,) the highest density of `volume` (X, Y, Z), lattice vertices over `aabb` (2, 3),
-    that projects into each pixel of `camera` (0 where none above `floor` does).
-
-    Splatting the vertices is exact for the pixels as long as a pixel is wider than a lattice
-    cell where it sees the object (no gaps between the splats); `spread_views` sizes them so."""
-    index = (volume > floor).nonzero()
-    values = volume[index[:, 0], index[:, 1], index[:, 2]]
-    cell = (aabb[1] - aabb[0]) / (torch.tensor(volume.shape, device=volume.device) - 1)
-    points = aabb[0] + index.to(aabb.dtype) * cell
-    w2c = torch.linalg.inv(torch.as_tensor(camera.c2w, dtype=points.dtype, device=points.device))
-    local = points @ w2c[:3, :3].T + w2c[:3, 3]
-    depth = -local[:, 2]
-    u = torch.floor(camera.fx * local[:, 0] / depth.clamp(min=1e-9) + camera.cx).long()
-    v = torch.floor(-camera.fy * local[:, 1] / depth.clamp(min=1e-9) + camera.cy).long()
-    ok = (depth > 0) & (u >= 0) & (v >= 0) & (u < camera.width) & (v < camera.height)
-    peak = torch.zeros(camera.width * camera.height, device=volume.device)
-    return peak.scatter_reduce(0, v[ok] * camera.width + u[ok], values[ok], "amax")
+    along each pixel's ray, read (trilinear, as marching cubes reads it) every lattice cell."""
+    origins, dirs = camera_rays(camera, volume.device)
+    step = float(((aabb[1] - aabb[0]) / (torch.tensor(volume.shape) - 1).to(aabb)).min())
+    centre, radius = aabb.mean(0), 0.5 * float((aabb[1] - aabb[0]).norm())
+    t_mid = ((centre - origins) * dirs).sum(-1)  # where each ray passes nearest the box's centre
+    offsets = torch.arange(-radius, radius + step, step, device=volume.device)
+    grid = volume.permute(2, 1, 0)[None, None]  # grid_sample reads (x, y, z) as (W, H, D)
+    peak = torch.zeros(len(origins), device=volume.device)
+    for part in offsets.split(32):
+        points = origins[:, None] + (t_mid[:, None] + part[None])[..., None] * dirs[:, None]
+        unit = 2.0 * (points - aabb[0]) / (aabb[1] - aabb[0]) - 1.0
+        values = F.grid_sample(grid, unit[None, None], align_corners=True, padding_mode="zeros")
+        peak = torch.maximum(peak, values[0, 0, 0].amax(-1))
+    return peak
 
 
 def best_level(peaks: torch.Tensor, targets: torch.Tensor) -> tuple[float, float]:
@@ -100,9 +97,8 @@ def choose_level(model: RadianceModel, volume: torch.Tensor, aabb: torch.Tensor,
     coarse = volume[::k, ::k, ::k]
     span = torch.tensor([(n - 1) // k * k for n in volume.shape]).to(aabb) * cell
     coarse_box = torch.stack([aabb[0], aabb[0] + span])
-    floor = -np.log(1.0 - FLOOR_ALPHA) / float(cell.max() * k)
     peaks, targets = [], []
     for cam in spread_views(cameras, views, aabb.mean(0).cpu().numpy(), float(cell.max()) * k):
-        peaks.append(peak_density(coarse, coarse_box, cam, floor))
+        peaks.append(peak_density(coarse, coarse_box, cam))
         targets.append(field_silhouette(model, cam).to(volume.device))
     return best_level(torch.cat(peaks), torch.cat(targets))

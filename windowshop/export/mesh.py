@@ -107,10 +107,25 @@ def decimate(mesh: Mesh, triangles: int) -> Mesh:
         return mesh
     import fast_simplification
 
-    reduction = 1.0 - triangles / len(mesh.faces)
     vertices, faces = fast_simplification.simplify(mesh.vertices.astype(np.float32), mesh.faces,
-                                                   target_reduction=reduction)
-    return compact(Mesh(vertices.astype(np.float64), faces.astype(np.int64)))
+                                                   target_count=triangles)
+    return compact(Mesh(vertices.astype(np.float64), drop_fins(faces.astype(np.int64))))
+
+
+def drop_fins(faces: np.ndarray) -> np.ndarray:
+    """`faces` (F, 3) without the pairs of faces on the same three vertices: the flat fins an
+    edge collapse leaves where a thin part folded shut (they enclose nothing)."""
+    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)
+    return faces[counts[inverse.reshape(-1)] == 1]
+
+
+def open_edges(mesh: Mesh) -> int:
+    """How many edges have one face only (0: the surface is closed)."""
+    f = mesh.faces
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return int(np.sum(counts == 1))
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:

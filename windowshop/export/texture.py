@@ -5,10 +5,12 @@ the faces of one axis joined through shared edges, flattened by projecting along
 face tilts more than 55 degrees from it, so texels stretch at most 1.7x); the charts' rectangles
 are packed into the square in shelves. (xatlas makes tighter atlases, but takes a minute for
 100k triangles on two cores; this takes well under a second.)
-Baking: each texel's surface point and normal, from the face it lies on; its colour is the field's
-seen head-on and from a few directions around the normal, averaged (view-independent, as a
-base colour must be). Empty texels take their nearest baked texel's colour, so that filtering at
-a chart's edge never reads the background.
+Baking: each texel's surface point and normal, from the face it lies on; its colour is the
+field's seen head-on, along the normal: a view-independent base colour. (Averaging over more
+directions costs one colour evaluation per direction and texel, too slow for a 2048^2 texture on
+a CPU; vertex colours, far fewer, are averaged over TILTED more directions around the normal.)
+Empty texels take their nearest baked texel's colour, so that filtering at a chart's edge never
+reads the background.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from windowshop.model import RadianceModel
 AXES = np.concatenate([np.eye(3), -np.eye(3)])  # (6, 3) the directions charts face
 PADDING = 2  # texels between charts
 FILL = 0.85  # share of the square the packed rectangles aim for
-TILT = 0.5  # the baking directions' tilt from the normal (radians) ...
+TILT = 0.5  # the vertex colours' viewing directions' tilt from the normal (radians) ...
 TILTED = 4  # ... and how many of them there are, besides the normal itself
 
 
@@ -139,21 +141,24 @@ def texel_surface(unwrapped: Unwrapped, ids: np.ndarray) -> tuple[np.ndarray, np
     w2 = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / det
     weights = np.clip(np.stack([1 - w1 - w2, w1, w2], -1), 0.0, None)  # edge texels: clamped in
     weights /= np.maximum(weights.sum(-1, keepdims=True), 1e-12)
-    points = np.einsum("tk,tkj->tj", weights, unwrapped.vertices[face])
-    normals = np.einsum("tk,tkj->tj", weights, unwrapped.normals[face])
+    weights = weights.astype(np.float32)
+    points = sum(weights[:, k:k + 1] * unwrapped.vertices[face[:, k]].astype(np.float32)
+                 for k in range(3))
+    normals = sum(weights[:, k:k + 1] * unwrapped.normals[face[:, k]].astype(np.float32)
+                  for k in range(3))
     normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
     return index, points, normals
 
 
-def bake_directions(normals: torch.Tensor) -> list[torch.Tensor]:
-    """Viewing directions (N, 3) each: straight at the surface, and TILTED tilted around it."""
+def bake_directions(normals: torch.Tensor, tilted: int) -> list[torch.Tensor]:
+    """Viewing directions (N, 3) each: straight at the surface, and `tilted` tilted around it."""
     helper = torch.where(normals[:, :1].abs() < 0.9, torch.tensor([1.0, 0, 0]).to(normals),
                          torch.tensor([0, 1.0, 0]).to(normals))
     t1 = torch.nn.functional.normalize(torch.cross(normals, helper, dim=-1), dim=-1)
     t2 = torch.cross(normals, t1, dim=-1)
     out = [-normals]
-    for k in range(TILTED):
-        angle = 2 * np.pi * k / TILTED
+    for k in range(tilted):
+        angle = 2 * np.pi * k / tilted
         side = np.cos(angle) * t1 + np.sin(angle) * t2
         out.append(-(np.cos(TILT) * normals + np.sin(TILT) * side))
     return out
@@ -161,7 +166,7 @@ def bake_directions(normals: torch.Tensor) -> list[torch.Tensor]:
 
 @torch.no_grad()
 def field_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
-                 chunk: int = 1 << 18) -> np.ndarray:
+                 tilted: int = TILTED, chunk: int = 1 << 18) -> np.ndarray:
     """(N, 3) in [0, 1]: the field's colour at `points` (N, 3), averaged over the directions of
     `bake_directions` around the outward `normals` (N, 3)."""
     device = next(model.parameters()).device
@@ -169,7 +174,7 @@ def field_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
     for start in range(0, len(points), chunk):
         p = torch.as_tensor(points[start:start + chunk], dtype=torch.float32, device=device)
         n = torch.as_tensor(normals[start:start + chunk], dtype=torch.float32, device=device)
-        colours = [model.colour(p, d) for d in bake_directions(n)]
+        colours = [model.colour(p, d) for d in bake_directions(n, tilted)]
         out.append(torch.stack(colours).mean(0).cpu())
     return torch.cat(out).numpy() if out else np.zeros((0, 3), dtype=np.float32)
 
@@ -179,7 +184,7 @@ def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int) -> np.nd
     ids = rasterise(unwrapped.uv, unwrapped.faces, size)
     index, points, normals = texel_surface(unwrapped, ids)
     image = np.zeros((size * size, 3), dtype=np.float32)
-    image[index] = field_colour(model, points, normals)
+    image[index] = field_colour(model, points, normals, tilted=0)  # head-on: see the docstring
     empty = (ids < 0)
     nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     image = image.reshape(size, size, 3)[nearest[0], nearest[1]]

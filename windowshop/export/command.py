@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,8 @@ def export_models(run_dir: str | Path, paths: list[Path], options: ExportOptions
     """One asset of the run at `run_dir`, written to every path of `paths` (format from each
     extension)."""
     formats = [output_format(Path(p), None) for p in paths]
+    if set(formats) == {"ply"}:
+        options = replace(options, texture=0)  # PLY holds vertex colours only
     asset = build_asset(run_dir, options, device, vertex_colours="ply" in formats)
     for path, fmt in zip(paths, formats):
         write_asset(asset, Path(path), fmt)
@@ -140,6 +143,8 @@ def export_command(run_dir: str, out: str, fmt: str | None, options: ExportOptio
     """The CLI: export, then say what was written."""
     out_path = Path(out)
     fmt = output_format(out_path, fmt)
+    if fmt == "ply":
+        options = replace(options, texture=0)  # PLY holds vertex colours only
     start = time.perf_counter()
     asset = build_asset(run_dir, options, device, vertex_colours=fmt == "ply")
     write_asset(asset, out_path, fmt)

@@ -221,6 +221,7 @@ function showModels(links) {
   $("usdz-download").href = links.usdz;
   const ar = $("ar");
   ar.href = links.usdz;
+  $("ar-image").src = links.poster;
   ar.hidden = !document.createElement("a").relList.supports("ar");  // Safari on iOS only
   window.showModel($("model-view"), links.model);
 }

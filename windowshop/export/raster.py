@@ -126,7 +126,7 @@ def render_mesh(vertices: np.ndarray, faces: np.ndarray, camera: Camera,
     v = torch.as_tensor(vertices, dtype=torch.float64)
     f = torch.as_tensor(faces, dtype=torch.int64)
     raster = rasterise(v, f, camera)
-    tex = None if texture is None else torch.as_tensor(texture).float() / 255.0
+    tex = None if texture is None else torch.tensor(np.asarray(texture)).float() / 255.0
     col = None if colours is None else torch.as_tensor(colours).float() / 255.0
     uvs = None if uv is None else torch.as_tensor(uv, dtype=torch.float32)
     image = shade(raster, f, background, uvs, tex, col)

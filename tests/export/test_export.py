@@ -9,7 +9,7 @@ import pytest
 import torch
 import trimesh
 
-from conftest import object_scene
+from export_helpers import object_scene
 from windowshop.cli import main
 from windowshop.config import ExportOptions
 from windowshop.errors import UserError

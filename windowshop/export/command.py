@@ -40,8 +40,8 @@ def check_options(options: ExportOptions) -> None:
     """Refuse settings that cannot make a model, before any work."""
     if options.triangles < 4:
         raise UserError(f"--triangles {options.triangles}: a closed surface needs at least 4")
-    if options.texture < 0 or options.texture > 8192:
-        raise UserError(f"--texture {options.texture}: give 0 (vertex colours) to 8192 pixels")
+    if options.texture != 0 and not 64 <= options.texture <= 8192:
+        raise UserError(f"--texture {options.texture}: give 64 to 8192 pixels, or 0 (vertex colours)")
     if options.size_cm is not None and options.size_cm <= 0:
         raise UserError(f"--size-cm {options.size_cm}: the height must be positive")
     if options.resolution < 8:

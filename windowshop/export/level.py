@@ -60,7 +60,8 @@ def peak_density(volume: torch.Tensor, aabb: torch.Tensor, camera: Camera) -> to
     grid = volume.permute(2, 1, 0)[None, None]  # grid_sample reads (x, y, z) as (W, H, D)
     peak = torch.zeros(len(origins), device=volume.device)
     for part in offsets.split(32):
-        points = origins[:, None] + (t_mid[:, None] + part[None])[..., None] * dirs[:, None]
+        t = (t_mid[:, None] + part[None]).clamp(min=0.0)  # never behind the camera
+        points = origins[:, None] + t[..., None] * dirs[:, None]
         unit = 2.0 * (points - aabb[0]) / (aabb[1] - aabb[0]) - 1.0
         values = F.grid_sample(grid, unit[None, None], align_corners=True, padding_mode="zeros")
         peak = torch.maximum(peak, values[0, 0, 0].amax(-1))

@@ -25,6 +25,7 @@ from windowshop.errors import UserError
 from windowshop.export.asset import Asset
 
 FORMATS = ("glb", "usdz", "ply")
+BAKE_DEPTHS = (0.5, 1.5)  # colours are read this many lattice cells under the surface, averaged
 
 
 def output_format(out: Path, fmt: str | None) -> str:
@@ -77,11 +78,13 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     lap("mesh")
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)
+    cell = float((aabb[1] - aabb[0]).max()) / options.resolution
+    depths = tuple(d * cell for d in BAKE_DEPTHS)
     uv = texture = None
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)
         lap("unwrap")
-        texture = tex.bake_texture(run.model, unwrapped, options.texture)
+        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths)
         lap("bake")
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)
@@ -89,7 +92,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         vertices, faces, normals = mesh.vertices, mesh.faces, vertex_normals(mesh)
     colours = None
     if vertex_colours or texture is None:
-        colours = np.round(255 * np.clip(tex.field_colour(run.model, vertices, normals), 0, 1))
+        colours = np.round(255 * tex.field_colour(run.model, vertices, normals, depths))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
             "triangles": int(len(faces)), "texture": options.texture, "seconds": seconds}

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 
-# Service settings that make a job take seconds: few training steps, few small frames.
+# Service settings that make a job take seconds: few training steps, few small frames, a small model.
 FAST_JOB = {
     "WINDOWSHOP_JOB__MODEL": "fast",
     "WINDOWSHOP_JOB__FIT__SECONDS": "4",
@@ -24,6 +24,9 @@ FAST_JOB = {
     "WINDOWSHOP_JOB__RENDER__WIDTH": "48",
     "WINDOWSHOP_JOB__RENDER__HEIGHT": "48",
     "WINDOWSHOP_JOB__RENDER__FPS": "12",
+    "WINDOWSHOP_JOB__EXPORT__TEXTURE": "256",
+    "WINDOWSHOP_JOB__EXPORT__RESOLUTION": "64",
+    "WINDOWSHOP_JOB__EXPORT__TRIANGLES": "5000",
     "WINDOWSHOP_DEVICE": "cpu",
     "WINDOWSHOP_POLL_SECONDS": "0.2",
 }

@@ -134,6 +134,14 @@ def cmd_video(args: argparse.Namespace) -> None:
     make_video(args.input, args.out, config, work_dir=args.work, device=pick_device(args.device))
 
 
+def cmd_export(args: argparse.Namespace) -> None:
+    from windowshop.device import pick_device
+    from windowshop.export.command import export_command
+
+    options = apply_overrides(cfg.ExportOptions(), flag_values(args), "export")
+    export_command(args.run, args.out, args.format, options, pick_device(args.device))
+
+
 def cmd_serve(args: argparse.Namespace) -> None:
     from windowshop.service.app import serve
     from windowshop.service.settings import ServiceSettings
@@ -254,6 +262,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_set(p, "voxel_pixels=2")
     p.add_argument("--device", default=None, help=DEVICE_HELP)
     p.set_defaults(func=cmd_video)
+
+    p = sub.add_parser("export", help="a run's object as a 3D model: GLB, USDZ (AR) or PLY",
+                       description="The object's surface from the field (only the object, +Y up, "
+                                   "standing at the origin), decimated, with a baked base-colour "
+                                   "texture; FILE.json beside it holds the matrix from the "
+                                   "model's coordinates to the scene's source frame.")
+    p.add_argument("run", help="run folder written by `windowshop fit` (or `video`'s work/run)")
+    p.add_argument("--out", required=True, help="the file to write: .glb, .usdz or .ply")
+    p.add_argument("--format", choices=["glb", "usdz", "ply"], default=None,
+                   help="the file's format (default: from --out's extension)")
+    add_flags(p, cfg.ExportOptions, "export")
+    p.add_argument("--device", default=None, help=DEVICE_HELP)
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("serve", help="the web service and page: upload photos, get a 360° video",
                        description="Flags override the WINDOWSHOP_* environment variables; every "

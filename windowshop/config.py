@@ -147,6 +147,19 @@ class VideoOptions:
 
 
 @dataclass(frozen=True)
+class ExportOptions:
+    """A run's object as a model file shops accept (`windowshop export`; `video` writes GLB and USDZ)."""
+
+    triangles: int = 100_000  # at most this many triangles (Amazon takes up to 150k)
+    texture: int = 2048  # pixels a side of the baked base-colour texture (0: vertex colours only)
+    size_cm: float | None = None  # scale the object to this real height (None: the scene's own units)
+    resolution: int = 256  # marching-cubes cells along the longest side of the object's box
+    level_views: int = 8  # training views whose silhouettes choose the surface's density level
+    keep_share: float = 0.05  # pieces under this share of the largest piece's area are dropped
+    roughness: float = 0.8  # of the PBR material (never metallic)
+
+
+@dataclass(frozen=True)
 class RunConfig:
     """`windowshop fit` and one run of a study: a model trained on a scene. Bare model settings
     (`voxel_pixels=2`) go into `model_settings`; the rest by name or dotted path (`fit.seconds`)."""
@@ -180,6 +193,8 @@ class PipelineConfig:
     # When prepare runs long, training is cut so that the video is out in about `deadline`.
     deadline: float | None = 60.0  # seconds for the whole job (none: train for all of fit.seconds)
     min_fit_seconds: float = 15.0  # ... but training is never cut to less than this
+    models: bool = True  # also write the object as 3D models beside the video (<stem>.glb, .usdz)
+    export: ExportOptions = field(default_factory=ExportOptions)
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@
     make_video(input, "spin.mp4")  =  prepare (unless the input is already posed)
                                    -> fit (the fast model, a short budget)
                                    -> render (an orbit turntable, poster, optional frames)
+                                   -> export (spin.glb and spin.usdz, unless config.models is off)
 
 The CLI and the web service both call `make_video`; it reports progress through
 `on_stage(stage, fraction)` with stage "prepare", "fit" or "render" and fraction in [0, 1].
@@ -40,6 +41,7 @@ class VideoResult:
     metrics: dict  # the fit's held-out metrics
     report: dict  # the capture's quality report (windowshop.quality), also at report_path
     report_path: Path
+    models: list[Path]  # the 3D models beside the video (GLB, USDZ); none when config.models is off
 
 
 def is_posed_scene(path: Path) -> bool:
@@ -144,16 +146,39 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
 
     quality = quality_report(scene, metrics, rendered.path, _prepare_report(scene_dir, source))
     report_path, _ = write_quality_report(out_mp4.with_name(f"{out_mp4.stem}_report.json"), quality)
+
+    models = _export(work / "run", out_mp4, config, device, seconds, show) if config.models else []
     result = VideoResult(mp4=out_mp4, poster=outputs.poster, scene_dir=Path(scene_dir),
                          run_dir=work / "run", seconds=seconds, metrics=metrics, report=quality,
-                         report_path=report_path)
+                         report_path=report_path, models=models)
     (work / MARKER).write_text(json.dumps({**asdict(result), "config": asdict(config)},
                                           indent=2, default=str))
     if show:
         print("\n".join(summary_lines(quality)), file=sys.stderr)
-        print(f"wrote {out_mp4} and {report_path.name} in {sum(seconds.values()):.0f} s",
-              file=sys.stderr)
+        names = ", ".join(p.name for p in [report_path, *models])
+        print(f"wrote {out_mp4} and {names} in {sum(seconds.values()):.0f} s", file=sys.stderr)
     return result
+
+
+def _export(run_dir: Path, out_mp4: Path, config: PipelineConfig, device: torch.device | str,
+            seconds: dict[str, float], show: bool) -> list[Path]:
+    """The run's object as `<stem>.glb` and `<stem>.usdz` beside the video (within the render
+    stage's progress: the service knows three stages). A field with no surface to export costs
+    the models, not the video: it is said and skipped."""
+    from windowshop.export.command import export_models
+
+    start = time.perf_counter()
+    models = [out_mp4.with_suffix(".glb"), out_mp4.with_suffix(".usdz")]
+    try:
+        export_models(run_dir, models, config.export, device)
+    except UserError as err:
+        if show:
+            print(f"export: skipped: {err}", file=sys.stderr)
+        return []
+    seconds["export"] = time.perf_counter() - start
+    if show:
+        print(f"export: {seconds['export']:.1f} s", file=sys.stderr)
+    return models
 
 
 def _prepare_report(scene_dir: Path, source: Path) -> dict | None:

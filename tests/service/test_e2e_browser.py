@@ -1,7 +1,8 @@
 """End to end in a real browser: Debian's chromium, driven by Playwright, against `windowshop serve`.
 
 A small posed scene goes up through the page; once the job is done the video must play (its time
-advances) and dragging the spin viewer must change the frame. Screenshots of the result page on a
+advances), dragging the spin viewer must change the frame, and the 3D view must draw the model
+(pixels other than its background) and turn when dragged. Screenshots of the result page on a
 desktop and on a phone-sized screen are kept in test-artifacts/. The owner cancels a second job from
 the page, where the share link opened in another browser shows neither cancel nor delete.
 """
@@ -50,6 +51,22 @@ def wait_js(page, expression: str, timeout: float = 30.0) -> None:
     while not page.evaluate(expression):
         assert time.monotonic() < deadline, f"never true: {expression}"
         time.sleep(0.1)
+
+
+# the share of the 3D view's pixels that are not its white background
+MODEL_PIXELS = """(() => {
+  const source = document.getElementById('model-view');
+  const copy = document.createElement('canvas');
+  [copy.width, copy.height] = [source.width, source.height];
+  const context = copy.getContext('2d');
+  context.drawImage(source, 0, 0);
+  const pixels = context.getImageData(0, 0, copy.width, copy.height).data;
+  let drawn = 0;
+  for (let i = 0; i < pixels.length; i += 4) {
+    if (pixels[i] < 240 || pixels[i + 1] < 240 || pixels[i + 2] < 240) drawn++;
+  }
+  return drawn / (pixels.length / 4);
+})()"""
 
 
 def wait_until_done(page, timeout_ms: int = 240_000) -> None:
@@ -106,6 +123,26 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     wait_js(page, "document.getElementById('coverage').complete"
                   " && document.getElementById('coverage').naturalWidth > 100")
     assert job_id in page.get_attribute(f"#my-jobs a[href='/jobs/{job_id}']", "href")
+
+    # the 3D model: the GLB drawn by viewer.js (WebGL), turned by dragging
+    assert page.get_attribute("#model-download", "href").endswith("/model.glb")
+    assert page.get_attribute("#usdz-download", "href").endswith("/model.usdz")
+    wait_js(page, "['ready', 'failed'].includes(document.getElementById('model-view').dataset.state)")
+    assert page.get_attribute("#model-view", "data-state") == "ready", \
+        page.get_attribute("#model-view", "data-error")
+    assert not page.is_visible("#ar")  # AR Quick Look is offered on iOS only
+    drawn = page.evaluate(MODEL_PIXELS)
+    assert drawn > 0.02, "the 3D view is blank"
+    view = page.locator("#model-view")
+    view.scroll_into_view_if_needed()
+    box = view.bounding_box()
+    before = view.screenshot()
+    page.mouse.move(box["x"] + box["width"] * 0.3, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] * 0.7, box["y"] + box["height"] / 2, steps=8)
+    page.mouse.up()
+    page.wait_for_timeout(200)
+    assert view.screenshot() != before  # orbiting turned the model
     page.screenshot(path=str(ARTIFACTS / "e2e-desktop.png"), full_page=True)
     page.close()
 

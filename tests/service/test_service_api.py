@@ -125,7 +125,7 @@ def test_photos_make_a_queued_job_with_an_unguessable_id(client):
     assert status["queue_position"] == 0
     assert client.get(b["url"]).json()["queue_position"] == 1
     assert status["links"] == {"video": None, "poster": None, "frames": [], "report": None,
-                               "coverage": None}
+                               "coverage": None, "model": None, "usdz": None}
     names = sorted(p.name for p in (client.settings.jobs_dir / a["id"] / "input").iterdir())
     assert names == ["IMG_0.jpg", "IMG_1.jpg", "IMG_2.jpg"]  # photo names kept, upload parts gone
 

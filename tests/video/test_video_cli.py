@@ -20,7 +20,7 @@ from windowshop.video.encode import probe_video
 from shared_data import DATA
 
 TINY = apply_overrides(PipelineConfig(), {"fit.iters": 4, "scene.max_side": 32, "render.frames": 4,
-                                          "render.width": 32, "render.height": 32})
+                                          "render.width": 32, "render.height": 32, "models": False})
 
 
 @pytest.fixture(scope="module")
@@ -65,9 +65,18 @@ def test_posed_scene_skips_prepare_and_reports_stages(posed, tmp_path):
     assert (tmp_path / "spin_coverage.png").is_file()
 
 
+def test_video_writes_the_3d_models_beside_it(posed, tmp_path):
+    config = apply_overrides(TINY, {"models": True, "fit.iters": 150, "export.texture": 64,
+                                    "export.resolution": 32, "export.triangles": 800})
+    result = make_video(posed, tmp_path / "spin.mp4", config, show=False)
+    assert result.models == [tmp_path / "spin.glb", tmp_path / "spin.usdz"]
+    assert all(p.is_file() and p.with_name(p.name + ".json").is_file() for p in result.models)
+    assert "export" in result.seconds
+
+
 def test_cli_video_prints_each_stage(posed, tmp_path, capsys):
     code = main(["video", str(posed), "--out", str(tmp_path / "out.mp4"), "--iters", "3",
-                 "--frames", "3", "--size", "32", "--scene.max-side", "16"])
+                 "--frames", "3", "--size", "32", "--scene.max-side", "16", "--no-models"])
     assert code == 0
     err = capsys.readouterr().err
     assert "fit: " in err and "render: " in err and "wrote" in err

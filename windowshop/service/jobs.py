@@ -25,6 +25,8 @@ from windowshop.service.store import RUNNING, ProgressStore
 # The pipeline's stage names, and the job states they put the job in.
 STAGE_STATES = {"prepare": "preparing", "fit": "training", "train": "training", "render": "rendering"}
 FRAME_NAME = "frame_{:04d}.jpg"  # per-frame images in result/frames, as the turntable writes them
+# API name -> file in result/: make_video names the 3D models after the video (video.mp4)
+MODEL_FILES = {"model.glb": "video.glb", "model.usdz": "video.usdz"}
 FRAME_GLOB = "frame_*.jpg"
 # Rough share of a job's time each stage takes, for the time-left estimate.
 STAGE_WEIGHTS = {"preparing": 0.3, "training": 0.55, "rendering": 0.15}

@@ -27,7 +27,7 @@ from starlette.formparsers import MultiPartException
 from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
 from windowshop.overrides import leaves
-from windowshop.service.jobs import FRAME_NAME, job_config, save_job_config
+from windowshop.service.jobs import FRAME_NAME, MODEL_FILES, job_config, save_job_config
 from windowshop.service.retention import folder_bytes
 from windowshop.service.settings import ServiceSettings, job_dir
 from windowshop.service.store import DONE, FINISHED, QUEUED, Job, JobQueue
@@ -67,6 +67,8 @@ class JobLinks(BaseModel):
     frames: list[str]  # per-frame images of the turntable, in order
     report: str | None = None  # the capture's quality report (JSON: advice, coverage, PSNR)
     coverage: str | None = None  # where the photos were taken from (PNG)
+    model: str | None = None  # the object as a 3D model (GLB), when the job made one
+    usdz: str | None = None  # ... and as USDZ, for AR Quick Look on iOS
 
 
 class JobStatus(BaseModel):
@@ -147,7 +149,16 @@ def job_status(request: Request, job: Job) -> JobStatus:
                        poster=f"{base}/poster.jpg" if done else None,
                        frames=[f"{base}/frames/{i}.jpg" for i in range(job.frames if done else 0)],
                        report=f"{base}/report.json" if done else None,
-                       coverage=f"{base}/coverage.png" if done else None))
+                       coverage=f"{base}/coverage.png" if done else None,
+                       **_model_links(request, job, base)))
+
+
+def _model_links(request: Request, job: Job, base: str) -> dict:
+    """The 3D models' links, once done and if the job made them (models can be turned off)."""
+    result = job_dir(_settings(request), job.id) / "result"
+    if job.state != DONE or not (result / MODEL_FILES["model.glb"]).is_file():
+        return {}
+    return {"model": f"{base}/model.glb", "usdz": f"{base}/model.usdz"}
 
 
 class _LimitedBody:
@@ -306,6 +317,20 @@ def get_report(request: Request, job_id: str) -> FileResponse:
             summary="Where the photos were taken from around the object, unphotographed arcs in red")
 def get_coverage(request: Request, job_id: str) -> FileResponse:
     return FileResponse(_result(request, job_id, "video_coverage.png"), media_type="image/png")
+
+
+@router.get("/jobs/{job_id}/model.glb", response_class=FileResponse, responses=_REFUSALS,
+            summary="The object as a 3D model (binary glTF, +Y up, metres or the scene's units)")
+def get_model(request: Request, job_id: str) -> FileResponse:
+    return FileResponse(_result(request, job_id, MODEL_FILES["model.glb"]),
+                        media_type="model/gltf-binary")
+
+
+@router.get("/jobs/{job_id}/model.usdz", response_class=FileResponse, responses=_REFUSALS,
+            summary="The object as USDZ, for AR Quick Look on iOS")
+def get_usdz(request: Request, job_id: str) -> FileResponse:
+    return FileResponse(_result(request, job_id, MODEL_FILES["model.usdz"]),
+                        media_type="model/vnd.usdz+zip")
 
 
 @router.get("/jobs/{job_id}/frames/{index}.jpg", response_class=FileResponse, responses=_REFUSALS,

@@ -218,6 +218,20 @@ function showResult(status) {
   $("share").hidden = false;
   startSpin(status.links.frames);
   showReport(status.links);
+  showModels(status.links);
+}
+
+// The 3D model (viewer.js) and, on iPhones and iPads, AR Quick Look of the USDZ.
+function showModels(links) {
+  $("model").hidden = !links.model;
+  if (!links.model) return;
+  $("model-download").href = links.model;
+  $("usdz-download").href = links.usdz;
+  const ar = $("ar");
+  ar.href = links.usdz;
+  $("ar-image").src = links.poster;
+  ar.hidden = !document.createElement("a").relList.supports("ar");  // Safari on iOS only
+  window.showModel($("model-view"), links.model);
 }
 
 // What the photos gave and what to reshoot: the capture's quality report.

@@ -1,0 +1,22 @@
+"""The built-in object's scene as if from a source frame that is not the normalised one, so an
+export's side-file matrix has work to do (tests/export/)."""
+
+import dataclasses
+
+import numpy as np
+
+from windowshop.scene.synthetic import synthetic_scene
+
+# source frame -> normalised frame: a turn about x, a scale and a shift (a similarity)
+TURN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+SOURCE_TO_NORMALISED = np.block([[0.5 * TURN, np.array([[0.2], [-0.1], [0.3]])],
+                                 [np.zeros((1, 3)), np.ones((1, 1))]])
+
+
+def object_scene():
+    """The built-in object's scene, said to come from a source frame SOURCE_TO_NORMALISED away."""
+    scene = synthetic_scene(n_train=24, n_test=4, size=32)
+    scene.transform = SOURCE_TO_NORMALISED
+    scene.views = [dataclasses.replace(v, stored_camera=scene.source_camera(v.camera))
+                   for v in scene.views]
+    return scene

@@ -1,0 +1,158 @@
+"""`windowshop export`: a run folder -> the object as GLB, USDZ or PLY, with its side file.
+
+    build_asset(run)  =  density lattice over the object's box (mesh.sample_volume)
+                      -> the surface's level from the field's silhouettes (level.choose_level)
+                      -> marching cubes, largest pieces, decimation (mesh.object_mesh)
+                      -> the model frame: +Y up, standing at the origin (frame.model_frame)
+                      -> UVs and the baked base colour (texture)
+    write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
+
+`windowshop video` calls `export_models` to write GLB and USDZ from one asset.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from windowshop.config import ExportOptions
+from windowshop.errors import UserError
+from windowshop.export.asset import Asset
+
+FORMATS = ("glb", "usdz", "ply")
+BAKE_DEPTHS = (0.5, 1.5)  # colours are read this many lattice cells under the surface, averaged
+
+
+def output_format(out: Path, fmt: str | None) -> str:
+    """The format asked for: `fmt`, else the output's extension."""
+    fmt = (fmt or out.suffix.lstrip(".")).lower()
+    if fmt not in FORMATS:
+        raise UserError(f"{out}: say --format {'|'.join(FORMATS)} or name the file .glb, .usdz "
+                        f"or .ply")
+    return fmt
+
+
+def check_options(options: ExportOptions) -> None:
+    """Refuse settings that cannot make a model, before any work."""
+    if options.triangles < 4:
+        raise UserError(f"--triangles {options.triangles}: a closed surface needs at least 4")
+    if options.texture != 0 and not 64 <= options.texture <= 8192:
+        raise UserError(f"--texture {options.texture}: give 64 to 8192 pixels, or 0 (vertex colours)")
+    if options.size_cm is not None and options.size_cm <= 0:
+        raise UserError(f"--size-cm {options.size_cm}: the height must be positive")
+    if options.resolution < 8:
+        raise UserError(f"--resolution {options.resolution}: give at least 8 cells")
+
+
+def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
+                device: torch.device | str = "cpu", vertex_colours: bool = False) -> Asset:
+    """The object of the run at `run_dir` as an Asset (see the module docstring); vertex
+    colours are baked too when asked for (PLY) or when there is no texture."""
+    from windowshop.export import texture as tex
+    from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
+    from windowshop.export.level import choose_level
+    from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
+    from windowshop.fit.checkpoint import load_run
+
+    check_options(options)
+    clock, seconds = time.perf_counter(), {}
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        seconds[stage], clock = round(now - clock, 3), now
+
+    run = load_run(run_dir, device)
+    aabb = np.asarray(run.bounds.aabb, dtype=np.float64)
+    volume = sample_volume(run.model, aabb, options.resolution)
+    lap("volume")
+    level, iou = choose_level(run.model, volume, torch.as_tensor(aabb, dtype=torch.float32,
+                                                                 device=volume.device),
+                              run.train_cameras, options.level_views)
+    lap("level")
+    mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
+    lap("mesh")
+    frame = model_frame(mesh.vertices, run.transform, options.size_cm)
+    cell = float((aabb[1] - aabb[0]).max()) / options.resolution
+    depths = tuple(d * cell for d in BAKE_DEPTHS)
+    uv = texture = None
+    if options.texture > 0:
+        unwrapped = tex.unwrap(mesh, options.texture)
+        lap("unwrap")
+        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths)
+        lap("bake")
+        vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
+                                        unwrapped.uv)
+    else:
+        vertices, faces, normals = mesh.vertices, mesh.faces, vertex_normals(mesh)
+    colours = None
+    if vertex_colours or texture is None:
+        colours = np.round(255 * tex.field_colour(run.model, vertices, normals, depths))
+        lap("vertex colours")
+    info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
+            "triangles": int(len(faces)), "texture": options.texture, "seconds": seconds}
+    return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
+                 normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),
+                 uv=None if uv is None else uv.astype(np.float32), texture=texture,
+                 vertex_colours=None if colours is None else colours.astype(np.uint8),
+                 roughness=options.roughness, frame=frame, info=info)
+
+
+def write_asset(asset: Asset, path: Path, fmt: str) -> None:
+    """`asset` to `path` in format `fmt` (glb, usdz, ply), and the side file `path`.json."""
+    from windowshop.export.frame import write_side_file
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if fmt == "glb":
+        from windowshop.export.glb import write_glb
+
+        write_glb(asset, path)
+    elif fmt == "usdz":
+        from windowshop.export.usdz import write_usdz
+
+        write_usdz(asset, path)
+    else:
+        from windowshop.export.ply import write_ply
+
+        write_ply(asset, path)
+    write_side_file(side_file(path), asset.frame, {"format": fmt, **asset.info})
+
+
+def side_file(path: Path) -> Path:
+    """FILE.json beside FILE (`model.glb` -> `model.glb.json`)."""
+    return path.with_name(path.name + ".json")
+
+
+def export_models(run_dir: str | Path, paths: list[Path], options: ExportOptions = ExportOptions(),
+                  device: torch.device | str = "cpu") -> Asset:
+    """One asset of the run at `run_dir`, written to every path of `paths` (format from each
+    extension)."""
+    formats = [output_format(Path(p), None) for p in paths]
+    if set(formats) == {"ply"}:
+        options = replace(options, texture=0)  # PLY holds vertex colours only
+    asset = build_asset(run_dir, options, device, vertex_colours="ply" in formats)
+    for path, fmt in zip(paths, formats):
+        write_asset(asset, Path(path), fmt)
+    return asset
+
+
+def export_command(run_dir: str, out: str, fmt: str | None, options: ExportOptions,
+                   device: torch.device | str = "cpu") -> Asset:
+    """The CLI: export, then say what was written."""
+    out_path = Path(out)
+    fmt = output_format(out_path, fmt)
+    if fmt == "ply":
+        options = replace(options, texture=0)  # PLY holds vertex colours only
+    start = time.perf_counter()
+    asset = build_asset(run_dir, options, device, vertex_colours=fmt == "ply")
+    write_asset(asset, out_path, fmt)
+    size = out_path.stat().st_size / 1e6
+    print(f"wrote {out_path} ({size:.1f} MB, {asset.info['triangles']} triangles, height "
+          f"{asset.frame.height:.3g} {asset.frame.units}) and {side_file(out_path).name} in "
+          f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+    return asset

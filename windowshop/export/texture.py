@@ -1,0 +1,179 @@
+"""Texture coordinates and the base-colour texture, baked from the field's colour.
+
+UVs: every face joins the chart of the axis (+-x, +-y, +-z) its normal faces most, a chart being
+the faces of one axis joined through shared edges, flattened by projecting along that axis (no
+face tilts more than 55 degrees from it, so texels stretch at most 1.7x); the charts' rectangles
+are packed into the square in shelves. (xatlas makes tighter atlases, but takes a minute for
+100k triangles on two cores; this takes well under a second.)
+Baking: each texel's surface point and normal, from the face it lies on; its colour is the field's
+seen head-on (along the inward normal), averaged over a few depths just under the surface: where a
+ray would stop, so what the photos taught the field. (The colour at the iso-surface point itself
+is not that: the fast model composites features along a ray, and the level's point is where a ray
+has barely begun to stop. On lego, held-out PSNR inside the silhouette: 15.8 dB at the surface,
+18.1 averaged under it, 17.9 for a full head-on render of each texel at 15x the cost.)
+Empty texels take their nearest baked texel's colour, so that filtering at a chart's edge never
+reads the background.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy import ndimage, sparse
+from scipy.sparse import csgraph
+
+from windowshop.export.mesh import Mesh, vertex_normals
+from windowshop.model import RadianceModel
+
+AXES = np.concatenate([np.eye(3), -np.eye(3)])  # (6, 3) the directions charts face
+PADDING = 2  # texels between charts
+FILL = 0.85  # share of the square the packed rectangles aim for
+
+
+@dataclass
+class Unwrapped:
+    """A mesh with texture coordinates: its vertices split where charts meet."""
+
+    vertices: np.ndarray  # (V', 3) float64
+    faces: np.ndarray  # (F, 3) int64
+    normals: np.ndarray  # (V', 3) unit
+    uv: np.ndarray  # (V', 2) in [0, 1], glTF's convention: v = 0 at the image's top row
+
+
+def chart_labels(mesh: Mesh) -> np.ndarray:
+    """(F,) the chart of every face (see the module docstring)."""
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    axis = np.argmax(np.cross(b - a, c - a) @ AXES.T, axis=1)
+    edges = np.concatenate([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
+    face = np.tile(np.arange(len(mesh.faces)), 3)
+    key = np.sort(edges, axis=1) @ np.array([len(mesh.vertices), 1])
+    order = np.argsort(key, kind="stable")
+    key, face = key[order], face[order]
+    pair = np.flatnonzero(key[1:] == key[:-1])  # an edge's two faces lie next to each other
+    f0, f1 = face[pair], face[pair + 1]
+    same = axis[f0] == axis[f1]
+    n = len(mesh.faces)
+    graph = sparse.coo_matrix((np.ones(int(same.sum())), (f0[same], f1[same])), shape=(n, n))
+    return csgraph.connected_components(graph, directed=False)[1]
+
+
+def _projection(axis: np.ndarray) -> np.ndarray:
+    """(6, 3, 2): for each chart axis, the two world axes spanning its plane (right-handed)."""
+    out = np.zeros((6, 3, 2))
+    for k, n in enumerate(AXES):
+        u = np.roll(np.abs(n), 1)  # a world axis perpendicular to n
+        out[k, :, 0], out[k, :, 1] = u, np.cross(n, u)
+    return out[axis]
+
+
+def shelf_pack(sizes: np.ndarray, width: float) -> tuple[np.ndarray, float]:
+    """Corners (N, 2) of rectangles `sizes` (N, 2) packed in shelves of `width`, tallest first,
+    and the height used."""
+    order = np.argsort(-sizes[:, 1], kind="stable")
+    corners = np.zeros_like(sizes)
+    x = y = shelf = 0.0
+    for i in order:
+        w, h = sizes[i]
+        if x + w > width:
+            x, y, shelf = 0.0, y + shelf, 0.0
+        corners[i] = (x, y)
+        x, shelf = x + w, max(shelf, h)
+    return corners, y + shelf
+
+
+def unwrap(mesh: Mesh, size: int) -> Unwrapped:
+    """`mesh` with texture coordinates of a `size` x `size` texture (see the module docstring)."""
+    label = chart_labels(mesh)
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    axis = np.argmax(np.cross(b - a, c - a) @ AXES.T, axis=1)
+    # every (vertex, chart) pair becomes one vertex of the output
+    corner_chart = np.repeat(label, 3)
+    pairs, inverse = np.unique(np.stack([mesh.faces.reshape(-1), corner_chart], 1), axis=0,
+                               return_inverse=True)
+    chart_axis = np.zeros(label.max() + 1, dtype=np.int64)
+    chart_axis[label] = axis
+    basis = _projection(chart_axis[pairs[:, 1]])  # (V', 3, 2)
+    flat = np.einsum("vi,vij->vj", mesh.vertices[pairs[:, 0]], basis)
+    n_charts = label.max() + 1
+    lo = np.full((n_charts, 2), np.inf)
+    hi = np.full((n_charts, 2), -np.inf)
+    np.minimum.at(lo, pairs[:, 1], flat)
+    np.maximum.at(hi, pairs[:, 1], flat)
+    extent = hi - lo
+    scale = np.sqrt(FILL * size * size / np.sum((extent + 1e-12).prod(1)))  # texels per unit
+    while True:
+        sizes = extent * scale + 2 * PADDING
+        corners, used = shelf_pack(sizes, size)
+        if used <= size:
+            break
+        scale *= 0.95
+    texel = (flat - lo[pairs[:, 1]]) * scale + corners[pairs[:, 1]] + PADDING
+    out = Mesh(vertices=mesh.vertices[pairs[:, 0]], faces=inverse.reshape(-1, 3))
+    return Unwrapped(vertices=out.vertices, faces=out.faces,
+                     normals=vertex_normals(mesh)[pairs[:, 0]], uv=texel / size)
+
+
+def rasterise(uv: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
+    """(size, size) int64: the face under each texel's centre (-1: none); uv (V, 2) in [0, 1]."""
+    import cv2
+
+    ids = np.zeros((size, size), dtype=np.int32)
+    corners = np.round((uv[faces] * size - 0.5) * 16).astype(np.int32)  # 4 fractional bits
+    for k, triangle in enumerate(corners):
+        cv2.fillConvexPoly(ids, triangle, k + 1, lineType=cv2.LINE_8, shift=4)
+    return ids.astype(np.int64) - 1
+
+
+def texel_surface(unwrapped: Unwrapped, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For the covered texels: flat indices (T,), surface points (T, 3) and unit normals (T, 3),
+    interpolated barycentrically over the face `ids` names."""
+    size = ids.shape[0]
+    index = np.flatnonzero(ids.reshape(-1) >= 0)
+    face = unwrapped.faces[ids.reshape(-1)[index]]  # (T, 3)
+    p = np.stack([index % size + 0.5, index // size + 0.5], -1) / size
+    a, b, c = (unwrapped.uv[face[:, i]] for i in range(3))
+    v0, v1, v2 = b - a, c - a, p - a
+    det = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    det = np.where(np.abs(det) < 1e-20, 1e-20, det)
+    w1 = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / det
+    w2 = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / det
+    weights = np.clip(np.stack([1 - w1 - w2, w1, w2], -1), 0.0, None)  # edge texels: clamped in
+    weights /= np.maximum(weights.sum(-1, keepdims=True), 1e-12)
+    weights = weights.astype(np.float32)
+    points = sum(weights[:, k:k + 1] * unwrapped.vertices[face[:, k]].astype(np.float32)
+                 for k in range(3))
+    normals = sum(weights[:, k:k + 1] * unwrapped.normals[face[:, k]].astype(np.float32)
+                  for k in range(3))
+    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
+    return index, points, normals
+
+
+@torch.no_grad()
+def field_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
+                 depths: tuple[float, ...], chunk: int = 1 << 18) -> np.ndarray:
+    """(N, 3) in [0, 1]: the field's colour under each of `points` (N, 3), seen head-on along the
+    inward normal (`normals` (N, 3) point outwards), averaged over `depths` (world units) below
+    the surface."""
+    device = next(model.parameters()).device
+    out = []
+    for first in range(0, len(points), chunk):
+        p = torch.as_tensor(points[first:first + chunk], dtype=torch.float32, device=device)
+        n = torch.as_tensor(normals[first:first + chunk], dtype=torch.float32, device=device)
+        out.append(torch.stack([model.colour(p - d * n, -n) for d in depths]).mean(0).cpu())
+    return torch.cat(out).numpy() if out else np.zeros((0, 3), dtype=np.float32)
+
+
+def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
+                 depths: tuple[float, ...]) -> np.ndarray:
+    """(size, size, 3) uint8: the base-colour texture of `unwrapped` (see the module docstring),
+    its colours read at `depths` under the surface."""
+    ids = rasterise(unwrapped.uv, unwrapped.faces, size)
+    index, points, normals = texel_surface(unwrapped, ids)
+    image = np.zeros((size * size, 3), dtype=np.float32)
+    image[index] = field_colour(model, points, normals, depths)
+    empty = (ids < 0)
+    nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+    image = image.reshape(size, size, 3)[nearest[0], nearest[1]]
+    return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)

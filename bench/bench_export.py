@@ -15,9 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -26,6 +23,7 @@ import numpy as np
 import torch
 import trimesh
 
+from provenance import machine
 from windowshop.config import ExportOptions, FitConfig, SceneOptions
 from windowshop.export.command import export_command, side_file
 from windowshop.export.frame import apply
@@ -39,19 +37,6 @@ from windowshop.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def machine() -> dict:
-    return {"commit": _commit(), "cpu": platform.processor() or platform.machine(),
-            "cores": os.cpu_count(), "load": round(os.getloadavg()[0], 2)}
 
 
 def trained(source: Path, options: SceneOptions, seconds: float, out: Path) -> tuple[Path, dict]:

@@ -26,8 +26,6 @@ import argparse
 import contextlib
 import json
 import os
-import platform
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -35,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from provenance import machine
 from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.batches import PixelBank
@@ -53,18 +52,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / ".." / "shared" / "data"
 BATCH = {"fast": 4096, "nerf": 1024}  # rays per step: each model's own setting
 PROBE_PIXELS = 4096
-
-
-def machine() -> dict:
-    """Where and when the row ran: commit, CPU, threads and the load at the start."""
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
-                                capture_output=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
-    return {"commit": commit, "platform": platform.platform(), "cpus": os.cpu_count(),
-            "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
-            "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
 
 
 class Probe:

@@ -9,22 +9,14 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import time
 from pathlib import Path
 
+from provenance import commit
 from windowshop.config import SceneOptions
 from windowshop.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main() -> None:
@@ -44,7 +36,7 @@ def main() -> None:
         "megapixels": round(pixels / 1e6, 2), "seconds": [round(t, 3) for t in times],
         "best_seconds": round(min(times), 3), "ms_per_view": round(1000 * min(times) / len(scene.views), 2),
         "cpu_seconds": round(min(cpu), 3), "load_average": round(os.getloadavg()[0], 2),
-        "cpus": os.cpu_count(), "machine": platform.machine(), "commit": _commit(),
+        "cpus": os.cpu_count(), "machine": platform.machine(), "commit": commit(),
     }))
 
 

@@ -16,7 +16,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
+from provenance import commit
 from windowshop.config import PipelineConfig, VideoOptions
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
@@ -136,9 +136,7 @@ def main() -> None:
     args = parser.parse_args()
     device = pick_device(None)
     config = apply_run_overrides(PipelineConfig(), parse_assignments(args.set), "--set")
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent).stdout.strip()
-    results = {"commit": commit, "settings": args.set, "machine": f"{platform.processor() or platform.machine()}, "
+    results = {"commit": commit(), "settings": args.set, "machine": f"{platform.processor() or platform.machine()}, "
                f"{os.cpu_count()} cores", "device": str(device), "rows": {}}
     photos = captures(args.photos)
     with tempfile.TemporaryDirectory(prefix="windowshop-bench-real-") as tmp:

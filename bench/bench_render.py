@@ -14,13 +14,13 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 
+from provenance import commit
 from windowshop.config import FitConfig, VideoOptions
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
@@ -34,14 +34,6 @@ from windowshop.video.turntable import render_turntable
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MODELS = {"nerf": "tiny", "fast": None}  # model -> preset (None: the model's default)
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def available(name: str) -> bool:
@@ -111,7 +103,7 @@ def main() -> None:
                     "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
                     "device": str(device),
                     "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None},
-        "commit": _commit(),
+        "commit": commit(),
     }, indent=2))
 
 

@@ -24,6 +24,9 @@ class SceneOptions:
     max_side: int | None = None  # or: resize so the longer side is at most this many pixels
     views: int | None = None  # keep N training views spread evenly around the object
     test_views: int | None = None  # keep K evenly spaced held-out views
+    # few-view protocols: the 8 views of RegNeRF/FreeNeRF/DietNeRF on Blender are 26,86,2,55,75,93,16,73
+    view_ids: tuple[int, ...] | None = None  # train on exactly these views (indices in the train split)
+    test_every: int | None = None  # keep every k-th held-out view, from the first (the protocol's 8)
     background: str = "white"  # for sources with alpha: "white", "black" or "alpha" (kept)
     normalize: bool = True  # centre, up = +z, object box scaled into [-1, 1]^3
 

@@ -46,6 +46,48 @@ def test_training_views_are_spread_and_never_test_views():
     assert gaps.max() < 2 * (2 * np.pi / 6) and gaps.min() > 0.5 * (2 * np.pi / 6)
 
 
+def test_named_training_views_and_every_kth_test_view():
+    """The few-view protocol: exactly the named training views, every 8th held-out one."""
+    source = ["train"] * 10 + ["val"] * 2 + ["test"] * 20
+    centres = np.random.default_rng(1).normal(size=(32, 3))
+    splits = assign_splits(source, centres, np.zeros(3), None, None, view_ids=(7, 2, 9),
+                           test_every=8)
+    assert [i for i, s in enumerate(splits) if s == "train"] == [2, 7, 9]
+    assert [i for i, s in enumerate(splits) if s == "test"] == [12, 20, 28]
+    assert splits.count("val") == 2
+    # no splits in the source: every k-th frame is held out, the ids count the rest
+    splits = assign_splits([None] * 12, centres[:12], np.zeros(3), None, None, view_ids=(0, 1),
+                           test_every=3)
+    assert [i for i, s in enumerate(splits) if s == "test"] == [0, 3, 6, 9]
+    assert [i for i, s in enumerate(splits) if s == "train"] == [1, 2]
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"views": 3, "view_ids": (1,)}, "not both"),
+    ({"test_views": 2, "test_every": 8}, "not both"),
+    ({"view_ids": (3, 10)}, "numbered 0 to 9"),
+    ({"test_every": 0}, "at least 1"),
+])
+def test_view_selection_refuses_what_cannot_be_met(kwargs, message):
+    from windowshop.errors import UserError
+
+    args = {"views": None, "test_views": None, **kwargs}
+    with pytest.raises(UserError, match=message):
+        assign_splits(["train"] * 10 + ["test"] * 4, np.zeros((14, 3)) + 1, np.zeros(3),
+                      args.pop("views"), args.pop("test_views"), **args)
+
+
+@needs_data
+def test_the_8_view_blender_protocol_on_lego():
+    ids = (26, 86, 2, 55, 75, 93, 16, 73)
+    scene = load_scene(DATA / "lego", SceneOptions(downscale=8, view_ids=ids, test_every=8))
+    def stems(split):
+        return [v.name.rsplit("/", 1)[-1].split(".")[0] for v in scene.split(split)]
+
+    assert stems("train") == [f"r_{i}" for i in sorted(ids)]
+    assert stems("test") == [f"r_{i}" for i in range(0, 200, 8)]
+
+
 def test_farthest_directions_on_the_octahedron():
     dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
                      [0.9, 0.1, 0], [0.8, 0, 0.2]], dtype=float)

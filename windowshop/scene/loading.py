@@ -139,7 +139,7 @@ def build_scene(source: Source, options: SceneOptions) -> Scene:
     target = _object_target(source)
     centres = np.stack([f.camera.center for f in source.frames])
     splits = assign_splits([f.split for f in source.frames], centres, target, options.views,
-                           options.test_views)
+                           options.test_views, options.view_ids, options.test_every)
     kept = [(f, s) for f, s in zip(source.frames, splits) if s is not None]
     views = parallel_map(lambda fs: _load_view(fs[0], fs[1], options), kept)
     normalizing = options.normalize and not source.normalized

@@ -72,6 +72,10 @@ class FastConfig:
     voxels: int | None = None  # voxels at the end of the growth; None: from the pixel size (below)
     voxel_pixels: float = 1.0  # ... so that a voxel is this many training pixels wide at the object
     max_voxels: int = 160**3  # ... but no more than this (memory and time)
+    # ... nor than this many per training pixel: a grid with more unknowns than its photos
+    # constrain learns haze where few of them look (kermit's 11 photos: 4.1M voxels -> 0.69M,
+    # held-out PSNR 20.3 -> 21.7 dB and a render twice as fast); well-covered scenes never reach it
+    max_voxels_per_pixel: float = 1.0
     start_fraction: float = 0.125  # voxels at the start, as a fraction of the final count
     growth: tuple[float, ...] = (0.1, 0.2, 0.3)  # progress at which the grid grows (geometrically)
     features: int = 16  # channels of the feature grid (16 floats: one cache line per vertex)

@@ -55,9 +55,14 @@ def test_the_grid_is_sized_by_the_photos_pixels(scene):
     extent = scene.aabb[1] - scene.aabb[0]
     voxel = (extent.prod() / config.voxels) ** (1 / 3)
     assert voxel == pytest.approx(pixel_footprint(scene), rel=0.01)
-    finer = FastModel.for_scene(FastConfig(voxel_pixels=0.5), scene)
+    finer = FastModel.for_scene(FastConfig(voxel_pixels=0.5, max_voxels_per_pixel=100.0), scene)
     assert finer.voxels == pytest.approx(8 * config.voxels, rel=0.01)
     assert FastModel.for_scene(FastConfig(voxels=1000), scene).voxels == 1000
+    # never more voxels than training pixels (12 photos of 32x32 here): the finer grid is capped
+    pixels = 12 * 32 * 32
+    assert config.voxels < pixels  # this well-covered scene is sized by its pixels' footprint
+    capped = FastModel.for_scene(FastConfig(voxel_pixels=0.5), scene)
+    assert capped.voxels == pixels < finer.voxels
 
 
 def test_spherical_harmonics_are_orthonormal_on_the_sphere():

@@ -86,7 +86,9 @@ class FastModel(RadianceModel):
             return config
         extent = np.diff(np.asarray(scene.aabb, dtype=float), axis=0)[0]
         voxel = pixel_footprint(scene) * config.voxel_pixels
-        voxels = min(config.max_voxels, int(np.prod(extent) / voxel**3))
+        pixels = sum(v.camera.width * v.camera.height for v in scene.split("train"))
+        voxels = min(config.max_voxels, int(np.prod(extent) / voxel**3),
+                     int(config.max_voxels_per_pixel * pixels))
         return replace(config, voxels=max(voxels, MIN_VOXELS))
 
     def __init__(self, config: FastConfig, bounds: Bounds):

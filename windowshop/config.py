@@ -82,7 +82,10 @@ class FastConfig:
     hidden: int = 64  # width of the colour MLP's one hidden layer
     mlp_bf16: bool = True  # run the MLP in bfloat16 where the hardware has it (CPU: AVX512-BF16)
     sh_degree: int = 2  # spherical harmonics of the view direction fed to it (-1: no view dependence)
-    step: float = 0.5  # marching step, in voxels of the current grid
+    step: float = 0.5  # marching step when training, in voxels of the current grid
+    # ... and when rendering: a trilinear grid has no detail finer than a voxel, so 0.75 changes
+    # a frame by under one 8-bit level (48-54 dB against 0.5) and marches 1.5x fewer samples
+    render_step: float = 0.75
     alpha_init: float = 1e-2  # opacity of one final-resolution step at initialisation
     lr_grid: float = 0.2  # Adam on both grids ...
     lr_mlp: float = 1e-2  # ... and on the MLP
@@ -91,7 +94,9 @@ class FastConfig:
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
     weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
-    render_threshold: float = 1e-3  # ... when rendering, where rays also stop at this transmittance
+    # ... when rendering, where rays also stop at this transmittance: under 1/255, so what is left
+    # behind can move no pixel by an 8-bit level (3e-3 against 1e-3: -17% render time, same PSNR)
+    render_threshold: float = 3e-3
     distortion: float = 0.0  # weight of mip-NeRF 360's distortion loss (concentrates each ray's weight)
     tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
     carve: bool = True  # masked scenes: never occupy space outside the visual hull of the masks

@@ -117,8 +117,9 @@ class FastModel(RadianceModel):
 
     @property
     def step_length(self) -> float:
-        """Marching step in world units for the current grid."""
-        return float(self.density_grid.voxel.min()) * self.config.step
+        """Marching step in world units for the current grid (training's or rendering's)."""
+        step = self.config.step if self.training else self.config.render_step
+        return float(self.density_grid.voxel.min()) * step
 
     def density(self, points: torch.Tensor) -> torch.Tensor:
         """Density (N,) at world points (N, 3): the grid's interpolated raw value, activated."""

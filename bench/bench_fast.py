@@ -36,9 +36,9 @@ import torch
 from provenance import machine
 from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
-from windowshop.fit.batches import PixelBank
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
-from windowshop.fit.trainer import Progress, TrainingRun, carve_to_scene, train_step
+from windowshop.fit.trainer import (Progress, TrainingRun, carve_to_scene, masked_training,
+                                     train_step, training_pixels)
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -75,18 +75,19 @@ class Probe:
 
 def start_run(scene, name: str, config, seconds: float, device: torch.device):
     """A fresh `name` model on `scene` in training mode, as `windowshop fit` builds it (seed 0, the
-    model's batch size), with a budget of `seconds`: its TrainingRun and the training PixelBank."""
+    model's batch size), with a budget of `seconds`: its TrainingRun, the training PixelBank and
+    the background kind its rays are drawn over."""
     torch.manual_seed(0)
     config = model_class(name).for_scene(config, scene)
     model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
-    carve_to_scene(model, scene)
+    carve_to_scene(model, scene, masked_training(scene, config))
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group["initial_lr"] = group["lr"]
     run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]),
                       {}, Path(tempfile.gettempdir()), Progress())
     model.train()
-    return run, PixelBank(scene.split("train"), device, use_alpha=scene.background == "alpha")
+    return run, *training_pixels(scene, config, device)
 
 
 def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[float],
@@ -96,13 +97,13 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
     The same steps as `windowshop fit` (trainer.train_step); probing is not counted as training.
     Returns the model and {"iterations", "train_seconds", "curve": [{seconds, step, psnr}]}.
     """
-    run, bank = start_run(scene, name, config, seconds, device)
+    run, bank, background = start_run(scene, name, config, seconds, device)
     model = run.model
     pending, curve = sorted(m for m in marks if m < seconds), []
     with contextlib.closing(ThreadTuner(device)) as tuner:  # as in windowshop fit
         while run.progress.fraction(run.config) < 1.0:
             tuner.before_step()
-            tuner.after_step(train_step(run, bank, scene.background)["seconds"])
+            tuner.after_step(train_step(run, bank, background)["seconds"])
             if pending and run.progress.elapsed >= pending[0]:
                 while pending and run.progress.elapsed >= pending[0]:
                     pending.pop(0)
@@ -188,7 +189,7 @@ def row_carve(args, device):
     seconds, probe, runs = args.seconds or 30.0, Probe(scene, device), []
     config = model_class("fast").for_scene(model_config("fast"), scene)
     start = time.perf_counter()  # the carve itself, once per fit before training (not counted)
-    carve_to_scene(model_class("fast")(config, Bounds.of_scene(scene)), scene)
+    carve_to_scene(model_class("fast")(config, Bounds.of_scene(scene)), scene, True)
     carve_seconds = time.perf_counter() - start
     for carve in (False, True):
         load = os.getloadavg()
@@ -244,16 +245,16 @@ def row_profile(args, device):
 
     scene = lego(SceneOptions(downscale=4, test_views=25))
     probe = Probe(scene, device, pixels=256)
-    run, bank = start_run(scene, "fast", model_config("fast"), 10.0, device)
+    run, bank, background = start_run(scene, "fast", model_config("fast"), 10.0, device)
     model = run.model
     while run.progress.fraction(run.config) < 1.0:
-        train_step(run, bank, scene.background)
+        train_step(run, bank, background)
     run.config = FitConfig(iters=None, seconds=1e9)  # keep the schedule where it is
     steps = 20
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         start = time.perf_counter()
         for _ in range(steps):
-            stats = train_step(run, bank, scene.background)
+            stats = train_step(run, bank, background)
         train_ms = (time.perf_counter() - start) / steps * 1e3
     cameras = turntable_path([v.camera for v in scene.split("train")],
                              VideoOptions(frames=3, width=256, height=256))

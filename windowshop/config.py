@@ -97,9 +97,16 @@ class FastConfig:
     # ... when rendering, where rays also stop at this transmittance: under 1/255, so what is left
     # behind can move no pixel by an 8-bit level (3e-3 against 1e-3: -17% render time, same PSNR)
     render_threshold: float = 3e-3
-    distortion: float = 0.0  # weight of mip-NeRF 360's distortion loss (concentrates each ray's weight)
     tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
     carve: bool = True  # masked scenes: never occupy space outside the visual hull of the masks
+    # Few-photo priors (issue 17; bench/RESULTS.md measures each): a setting left at None is chosen
+    # by the number of training photos, on at or under `few_views`, off above it.
+    few_views: int = 20
+    # mip-NeRF 360's distortion loss (concentrates each ray's weight): None: 0.01 with few photos
+    distortion: float | None = None
+    # views composited over a known colour with their alpha mattes (Blender's RGBA) trained over
+    # random colours and carved like masked scenes: None: with few photos
+    masked: bool | None = None
 
 
 FAST_PRESETS = {

@@ -169,11 +169,20 @@ def test_a_checkpoint_keeps_the_carve(carved_run):
     assert torch.equal(again.occupancy.occupied, again.occupancy.hull_at(again.occupancy.occupied.shape))
 
 
-@pytest.mark.parametrize("background, carve", [("white", True), ("alpha", False)])
-def test_unmasked_or_unasked_fits_are_not_carved(tmp_path, background, carve):
+@pytest.mark.parametrize("background, carve, masked", [("white", True, False), ("alpha", False, None)])
+def test_unmasked_or_unasked_fits_are_not_carved(tmp_path, background, carve, masked):
     scene = synthetic_scene(n_train=4, n_test=1, size=16, background=background)
-    fit(scene, "fast", FastConfig(voxels=12**3, carve=carve), FitConfig(iters=2, batch_rays=256),
-        tmp_path, "cpu", show_progress=False)
+    fit(scene, "fast", FastConfig(voxels=12**3, carve=carve, masked=masked),
+        FitConfig(iters=2, batch_rays=256), tmp_path, "cpu", show_progress=False)
     model = load_run(tmp_path).model
     assert model.occupancy.hull is None
     assert model.occupancy.occupied.all()  # nothing skipped before the occupancy warm-up
+
+
+def test_few_photos_over_white_with_mattes_are_carved(tmp_path):
+    scene = synthetic_scene(n_train=4, n_test=1, size=16, background="white")  # 4 photos: few
+    fit(scene, "fast", FastConfig(voxels=12**3), FitConfig(iters=2, batch_rays=256), tmp_path,
+        "cpu", show_progress=False)
+    model = load_run(tmp_path).model
+    assert model.config.masked and model.occupancy.hull is not None
+    assert 0 < model.occupancy.hull.float().mean() < 1

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from windowshop.config import FitConfig, NerfConfig, SceneOptions
+from windowshop.config import FastConfig, FitConfig, NerfConfig, SceneOptions
+from windowshop.field.fast import FastModel, with_priors
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.checkpoint import load_checkpoint, load_run
 from windowshop.fit.evaluate import comparison_image, evaluate_run, mean_color_psnr
-from windowshop.fit.trainer import Progress, fit
+from windowshop.fit.trainer import Progress, fit, masked_training, training_pixels
 from windowshop.rays import camera_rays
 from windowshop.render.frames import render_camera
 from windowshop.scene.types import Camera, Scene, View
@@ -66,6 +67,39 @@ def test_alpha_targets_use_the_same_background_as_the_render():
     batch = bank.sample(6)
     bg = torch.rand(6, 3)
     assert torch.allclose(batch.target(bg), 0.5 * batch.rgb + 0.5 * bg)
+
+
+def test_composited_targets_swap_the_stored_background_for_the_new_one():
+    # a straight colour c at alpha a stored over white is c a + (1 - a); over b it must be c a + b (1 - a)
+    scene = toy_scene(alpha=True)
+    straight = torch.tensor([0.8, 0.4, 0.2])
+    for view in scene.views:
+        view.image = (view.image * view.alpha[..., None] + (1 - view.alpha[..., None])).astype(np.float32)
+    bank = PixelBank(scene.split("train"), "cpu", use_alpha=True, over=(1.0, 1.0, 1.0))
+    bg = torch.rand(6, 3)
+    assert torch.allclose(bank.sample(6).target(bg), 0.5 * straight + 0.5 * bg, atol=1e-6)
+
+
+def test_masked_training_of_mattes_over_white_only_when_the_model_asks():
+    scene = toy_scene(alpha=True)  # composited over white, every view with its matte
+    few = FastModel.for_scene(FastConfig(), scene)  # 4 training photos: few
+    many = dataclasses.replace(few, masked=False)
+    assert masked_training(scene, few) and not masked_training(scene, many)
+    assert not masked_training(scene, TINY)  # the NeRF has no such prior
+    bank, background = training_pixels(scene, few, "cpu")
+    assert background == "alpha" and bank.alpha is not None and torch.equal(bank.over, torch.ones(3))
+    bank, background = training_pixels(scene, many, "cpu")
+    assert background == "white" and bank.alpha is None
+    assert not masked_training(toy_scene(), few)  # no mattes: nothing to mask with
+
+
+def test_few_photo_priors_switch_on_at_or_under_few_views():
+    few, many = with_priors(FastConfig(), 20), with_priors(FastConfig(), 21)
+    assert (few.distortion, few.masked) == (0.01, True)
+    assert (many.distortion, many.masked) == (0.0, False)
+    assert with_priors(FastConfig(distortion=0.5, masked=False), 8).distortion == 0.5
+    assert not with_priors(FastConfig(distortion=0.5, masked=False), 8).masked
+    assert with_priors(FastConfig(), None).distortion == 0.0  # a model built without a scene
 
 
 def test_progress_follows_steps_or_seconds():

@@ -71,6 +71,14 @@ def pixel_footprint(scene) -> float:
     return float(np.median(sizes))
 
 
+def with_priors(config: FastConfig, photos: int | None) -> FastConfig:
+    """`config` with the few-photo priors it leaves open (None) settled for `photos` training
+    photos (None: not known, so not few)."""
+    few = photos is not None and photos <= config.few_views
+    distortion = (0.01 if few else 0.0) if config.distortion is None else config.distortion
+    return replace(config, distortion=distortion, masked=few if config.masked is None else config.masked)
+
+
 class FastModel(RadianceModel):
     """Grids + tiny MLP + occupancy skipping; see the module docstring."""
 
@@ -81,7 +89,9 @@ class FastModel(RadianceModel):
 
     @classmethod
     def for_scene(cls, config: FastConfig, scene) -> FastConfig:
-        """Fill in the voxel count from the training pixels' size: finer photos, finer grid."""
+        """Fill in the few-photo priors from the number of training photos, and the voxel count
+        from the training pixels' size: finer photos, finer grid."""
+        config = with_priors(config, len(scene.split("train")))
         if config.voxels is not None:
             return config
         extent = np.diff(np.asarray(scene.aabb, dtype=float), axis=0)[0]
@@ -92,7 +102,7 @@ class FastModel(RadianceModel):
         return replace(config, voxels=max(voxels, MIN_VOXELS))
 
     def __init__(self, config: FastConfig, bounds: Bounds):
-        super().__init__(config, bounds)
+        super().__init__(with_priors(config, None), bounds)
         aabb = bounds.aabb_tensor()
         self.extent = aabb[1] - aabb[0]
         self.voxels = config.voxels or DEFAULT_VOXELS

@@ -24,12 +24,16 @@ class RayBatch:
     directions: torch.Tensor  # (R, 3) unit
     rgb: torch.Tensor  # (R, 3) the pixel colour as stored
     alpha: torch.Tensor | None  # (R,) the pixel's alpha when the views carry one
+    over: torch.Tensor | None = None  # (3,) the colour rgb is already composited over, if it is
 
     def target(self, background: torch.Tensor) -> torch.Tensor:
         """The colour (R, 3) the model must reproduce over `background` (R, 3)."""
         if self.alpha is None:
             return self.rgb
-        return self.rgb * self.alpha[:, None] + background * (1.0 - self.alpha[:, None])
+        behind = 1.0 - self.alpha[:, None]
+        if self.over is not None:  # compositing is linear: swap the stored colour for the new one
+            return self.rgb + (background - self.over) * behind
+        return self.rgb * self.alpha[:, None] + background * behind
 
 
 def camera_tables(cameras: list[Camera], device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -43,10 +47,15 @@ def camera_tables(cameras: list[Camera], device: torch.device) -> tuple[torch.Te
 class PixelBank:
     """All pixels of `views` on `device`, flattened view after view, row-major within a view."""
 
-    def __init__(self, views: list[View], device: torch.device | str, use_alpha: bool = False):
+    def __init__(self, views: list[View], device: torch.device | str, use_alpha: bool = False,
+                 over: tuple[float, float, float] | None = None):
+        """`use_alpha` keeps each pixel's alpha, for targets over any background; `over` is the
+        colour the images are composited over (None: their colour is straight, as "alpha" scenes
+        keep it)."""
         if use_alpha and any(v.alpha is None for v in views):
             raise ValueError("use_alpha needs an alpha channel in every view")
         self.device = torch.device(device)
+        self.over = torch.tensor(over, dtype=torch.float32, device=device) if over is not None else None
         self.rgb = torch.from_numpy(np.concatenate(
             [v.image.reshape(-1, 3) for v in views]).astype(np.float32)).to(device)
         self.alpha = torch.from_numpy(np.concatenate(
@@ -69,7 +78,8 @@ class PixelBank:
         fx, fy, cx, cy = self.intrinsics[view].unbind(-1)
         origins, directions = rays_from_directions(self.c2w[view], pixel_directions(fx, fy, cx, cy, u, v))
         alpha = None if self.alpha is None else self.alpha[index]
-        return RayBatch(origins=origins, directions=directions, rgb=self.rgb[index], alpha=alpha)
+        return RayBatch(origins=origins, directions=directions, rgb=self.rgb[index], alpha=alpha,
+                        over=self.over)
 
     def sample(self, n: int) -> RayBatch:
         """`n` rays through pixels drawn uniformly with replacement (torch's global generator)."""

@@ -118,7 +118,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         progress = _restore(model, optimizer, resume)  # with the carve it was trained with
     else:
         progress = Progress()
-        carve_to_scene(model, scene)
+        carve_to_scene(model, scene, masked_training(scene, model_config))
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
@@ -129,9 +129,9 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress, callbacks,
                       losses=losses, virtual=virtual)
     write_config(out_dir, model_name, model_config, fit_config, run.record)
-    bank = PixelBank(train_views, device, use_alpha=scene.background == "alpha")
+    bank, background = training_pixels(scene, model_config, device)
     try:
-        _train(run, bank, scene.background, show_progress)
+        _train(run, bank, background, show_progress)
     except FitCancelled:
         run.checkpoint()
         raise
@@ -160,11 +160,31 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
 
 
-def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
+def masked_training(scene: Scene, model_config: Any) -> bool:
+    """Whether training sees the object alone (random backgrounds, carving): always for "alpha"
+    scenes, and for scenes composited over a known colour when every training view carries its
+    matte and the model asks for it (its `masked` setting: the fast model's few-photo prior)."""
+    if scene.background == "alpha":
+        return True
+    return (bool(getattr(model_config, "masked", False)) and scene.background in BACKGROUNDS
+            and all(v.alpha is not None for v in scene.split("train")))
+
+
+def training_pixels(scene: Scene, model_config: Any, device) -> tuple[PixelBank, str]:
+    """The training views' pixels and the background kind their rays are drawn over."""
+    views = scene.split("train")
+    if not masked_training(scene, model_config):
+        return PixelBank(views, device), scene.background
+    over = BACKGROUNDS.get(scene.background)  # None: "alpha" scenes keep straight colour
+    return PixelBank(views, device, use_alpha=True, over=over), "alpha"
+
+
+def carve_to_scene(model: RadianceModel, scene: Scene, masked: bool) -> None:
     """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
-    training masks (at its `carve_cells`); scenes without masks stay whole, and so does a model
-    whose masks leave nothing (better floaters than no object at all)."""
-    if not getattr(model.config, "carve", False) or scene.background != "alpha":
+    training masks (at its `carve_cells`) when it trains on the object alone (`masked`); scenes
+    without masks stay whole, and so does a model whose masks leave nothing (better floaters than
+    no object at all)."""
+    if not getattr(model.config, "carve", False) or not masked:
         return
     views = [v for v in scene.split("train") if v.alpha is not None]
     if not views:

@@ -73,12 +73,23 @@ def _load_view(frame: SourceFrame, split: str, options: SceneOptions) -> View:
         stack = np.concatenate([rgb, alpha[..., None]], -1) if alpha is not None else rgb
         stack = undistort_image(stack, stored, camera, frame.distortion)
         rgb, alpha = (stack[..., :3], stack[..., 3]) if alpha is not None else (stack, None)
-    if matte:
+    if matte and options.background == "alpha":
+        rgb = straight_colour(rgb, alpha)
+    elif matte:
         colour = np.asarray(composite_colour(options.background), dtype=rgb.dtype)
         rgb = rgb + (1.0 - alpha[..., None]) * colour
     return View(camera=camera, image=np.ascontiguousarray(rgb, dtype=np.float32), split=split,
                 name=str(frame.image_path), alpha=alpha, stored_camera=frame.camera,
                 distortion=frame.distortion.as_dict() if frame.distortion else None)
+
+
+def straight_colour(premultiplied: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """(H, W, 3) colour not multiplied by `alpha` (H, W): what "alpha" scenes keep, as their masked
+    photos do, so that training and scoring composite each pixel once as rgb * a + bg * (1 - a)
+    (a premultiplied edge pixel would be darkened twice). Resampling is done premultiplied first,
+    so no colour of a transparent pixel leaks in; fully transparent pixels get black."""
+    a = alpha[..., None]
+    return np.where(a > 0, premultiplied / np.maximum(a, 1e-6), 0.0).clip(0.0, 1.0).astype(premultiplied.dtype)
 
 
 def _silhouette(view: View, source: Source) -> np.ndarray | None:

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 SPLITS = ("train", "val", "test")
-# A scene's background colour (RGB in [0, 1]) by name. "alpha" names none: its images are kept
-# composited over black (premultiplied) and the model learns them over random colours.
+# A scene's background colour (RGB in [0, 1]) by name. "alpha" names none: its images keep their
+# straight (not premultiplied) colour beside their alpha, and the model learns them over random colours.
 BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
 BACKGROUND_CHOICES = (*BACKGROUNDS, "alpha")
 

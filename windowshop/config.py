@@ -109,7 +109,9 @@ class PrepareOptions:
     max_side: int | None = 640  # working resolution: the longer side in pixels (None: as given)
     video_frames: int = 40  # frames sampled from a video
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
-    matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
+    # "exhaustive", "sequential", "retrieval" or "auto" (sequential for a video; photos by count
+    # and order: windowshop.photos.pairs)
+    matcher: str = "auto"
     masks: bool = True  # foreground masks (by colour on a plain background, else segmented)
     matting: str = "grabcut"  # "grabcut" (built in) or "rembg" (needs rembg and its weights)
     overwrite: bool = False  # replace an earlier prepare's output folder

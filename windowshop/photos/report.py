@@ -40,17 +40,18 @@ def plot_cameras(out: Path, cameras: list[Camera], aabb: np.ndarray, points: np.
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
     depth = 0.15 * float(np.median([np.linalg.norm(c.center) for c in cameras]))
     fig = plt.figure(figsize=(10, 5))
     for i, (elev, azim, title) in enumerate([(20, -60, "cameras around the object"),
                                              (90, -90, "from above")]):
         ax = fig.add_subplot(1, 2, i + 1, projection="3d")
-        for cam in cameras:
-            for seg in frustum_lines(cam, depth):
-                ax.plot(*seg.T, color="tab:blue", linewidth=0.6)
-        for seg in box_lines(aabb):
-            ax.plot(*seg.T, color="tab:red", linewidth=1.0)
+        # one collection for all frusta: a plot call a segment takes seconds for 100 cameras
+        frusta = [seg for cam in cameras for seg in frustum_lines(cam, depth)]
+        ax.add_collection3d(Line3DCollection(frusta, colors="tab:blue", linewidths=0.6))
+        ax.add_collection3d(Line3DCollection(list(box_lines(aabb)), colors="tab:red",
+                                             linewidths=1.0))
         if len(points):
             ax.scatter(*points.T, s=1, color="k", alpha=0.4)
         everything = np.concatenate([np.stack([c.center for c in cameras]), aabb])

@@ -255,10 +255,11 @@ def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, sourc
 def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
             found: Located, stages: Stages) -> dict:
     by_name = {p.name: p for p in photos}
+    unplaced = [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced]
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
-        "unplaced": [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced],
+        "unplaced": unplaced, "reshoot": report.reshoot([_shown(p) for p in photos], unplaced),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),

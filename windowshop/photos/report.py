@@ -26,11 +26,31 @@ def summary_lines(report: dict) -> list[str]:
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
     if report["unplaced"]:
         lines.append(f"  could not place: {', '.join(report['unplaced'])}")
+        lines += [f"    {name}: {advice}" for name, advice in report.get("reshoot", {}).items()]
     if report["masks"] != "none":
         how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "
                "points above the surface it stands on", "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
     return lines
+
+
+def reshoot(shown: list[str], unplaced: list[str]) -> dict[str, str]:
+    """What to reshoot for each photo that could not be placed: `shown` are all photos' names in
+    the order taken (file-name order), `unplaced` the ones without a pose. A photo is placed by
+    what it shares with others, so the advice names its placed neighbours in that order."""
+    missing = set(unplaced)
+    advice = {}
+    for i, name in enumerate(shown):
+        if name not in missing:
+            continue
+        before = next((n for n in reversed(shown[:i]) if n not in missing), None)
+        after = next((n for n in shown[i + 1:] if n not in missing), None)
+        between = " and ".join(n for n in (before, after) if n is not None)
+        advice[name] = ("it shares too few details with the others: retake it, and add a photo "
+                        f"or two between it and {between}" if between else
+                        "it shares too few details with the others: retake it")
+        advice[name] += " (steps of 10-15 degrees around the object, the whole object in view)"
+    return advice
 
 
 def plot_cameras(out: Path, cameras: list[Camera], aabb: np.ndarray, points: np.ndarray) -> Path:

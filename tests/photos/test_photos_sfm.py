@@ -31,7 +31,7 @@ def _images(tmp_path, paths, max_side=640):
     return tmp_path / "images", [f"{p.name}.jpg" for p in photos]
 
 
-def test_matching_advances_progress_and_verifies_every_pair(tmp_path):
+def test_matching_advances_progress_and_verifies_every_pair(tmp_path, monkeypatch):
     image_dir, names = _images(tmp_path, sorted((DATA / "kermit").glob("*.jpg"))[:4], 320)
     settings = sfm.SfmSettings()
     database = tmp_path / "database.db"
@@ -40,9 +40,10 @@ def test_matching_advances_progress_and_verifies_every_pair(tmp_path):
     events = []
     stages = Stages(on_stage=lambda stage, fraction: events.append(fraction), show=False,
                     fractions={"matching": 1.0})
+    monkeypatch.setattr(sfm, "MATCH_CHUNK", 2)
     with stages.stage("matching", len(pairs)) as advance:
         sfm.match(database, tmp_path, pairs, settings, False, advance)
-    assert len(events) >= len(pairs)  # a report per chunk (one pair each here), start and end
+    assert len(events) == 2 + len(pairs) // 2  # start, a report per chunk of 2 pairs, end
     assert events == sorted(events) and events[0] == 0.0 and events[-1] == 1.0
     with pycolmap.Database.open(database) as db:
         assert len(db.read_two_view_geometry_num_inliers()[0]) >= len(pairs) - 1

@@ -1,5 +1,6 @@
 """Seconds per `prepare` stage for kermit (11 photos), 20 beer_can photos and 80 frames of the
-beer_can video, as JSON.
+beer_can video (given as the video, then as a folder of photos: the matcher is picked by count and
+order), as JSON.
 
     python bench/bench_prepare.py [--max-side 640] [--frames 80] [--video] [--out results.json]
 
@@ -64,6 +65,8 @@ def main() -> None:
             frames = PrepareOptions(max_side=args.max_side, video_frames=args.frames)
             results[f"beer_can_video_{args.frames}"] = timed_prepare(
                 DATA / "beer_can" / "Beer.mp4", tmp / "beer_video", frames)
+            results[f"beer_can_photos_{args.frames}"] = timed_prepare(
+                tmp / "beer_video" / "images", tmp / "beer_photos", frames)
         results["kermit"] = timed_prepare(DATA / "kermit", tmp / "kermit", options)
         photos = tmp / "beer20"
         photos.mkdir()

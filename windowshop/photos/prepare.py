@@ -29,6 +29,7 @@ from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import matting_rembg, objectbox, output, plane, report, segment
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
+from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.scene import normalize
@@ -101,10 +102,10 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
 def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> SfmSettings:
     """Matcher, shared camera and known intrinsics (scaled to working pixels) for pycolmap."""
     matcher = options.matcher
-    if matcher == "auto":
-        matcher = "sequential" if inputs.kind == "video" else "exhaustive"
-    if matcher not in ("exhaustive", "sequential"):
-        raise UserError(f"unknown matcher {matcher!r}; use exhaustive, sequential or auto")
+    if matcher == "auto" and inputs.kind == "video":
+        matcher = "sequential"  # photos: by count and order (windowshop.photos.pairs)
+    if matcher not in ("auto",) + MATCHERS:
+        raise UserError(f"unknown matcher {matcher!r}; use {', '.join(MATCHERS)} or auto")
     single = len({(p.camera_key, p.pixels.shape) for p in photos}) == 1
     intrinsics = None
     if options.intrinsics is not None:
@@ -254,14 +255,16 @@ def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, sourc
 def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
             found: Located, stages: Stages) -> dict:
     by_name = {p.name: p for p in photos}
+    unplaced = [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced]
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
-        "unplaced": [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced],
+        "unplaced": unplaced, "reshoot": report.reshoot([_shown(p) for p in photos], unplaced),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
-        "attempts": [vars(a) for a in sfm.attempts], "masks": found.mask_kind,
+        "attempts": [vars(a) for a in sfm.attempts], "matcher": sfm.matcher,
+        "pairs": sfm.pairs, "masks": found.mask_kind,
         "plane": {"found": found.plane is not None, "inlier_share": None if found.plane is None
                   else round(found.plane.inlier_share, 3)},
         "background": found.background, "aabb": found.aabb.tolist(),

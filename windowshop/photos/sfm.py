@@ -5,34 +5,44 @@ Attempts, each kept only if it places more photos than the ones before:
 1. default COLMAP settings;
 2. a relaxed mapper (fewer matches and inliers needed to start a model and to add a view) -
    sparse rings such as the Middlebury temple split into two models without it;
-3. denser SIFT features (a lower peak threshold), matched again, with the relaxed mapper.
+3. "wide": features for wide baselines, matched again, with the relaxed mapper: denser SIFT (a
+   lower peak threshold) with affine-adapted shapes (features that survive the foreshortening
+   of a 30-45 degree step), a looser ratio test and fewer inliers needed for a pair. (Guided
+   matching placed no more of bench_fewphoto's sets and doubled the matching time.)
+Pairs are matched in chunks (windowshop.photos.pairs picks them), so matching shows progress.
 pycolmap's own logging (glog) stays quiet unless `verbose`.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pycolmap
 
+from windowshop.photos import pairs
 from windowshop.photos.progress import Stages
 
 MIN_KEYPOINTS = 80  # fewer SIFT features than this in a photo: too little texture to place it
-DENSE_PEAK = 0.002  # SIFT peak threshold of the dense retry (COLMAP's default is 0.0067)
-DENSE_RETRY_BELOW = 0.9  # the dense retry runs only when fewer than this share are placed
-# Video frames are matched with this many next frames only: frames far apart on a walk around a
-# symmetric object (a can on a tiled floor) match "through" the symmetry and fold the path over.
-SEQUENTIAL_OVERLAP = 5
+DENSE_PEAK = 0.002  # SIFT peak threshold of the wide retry (COLMAP's default is 0.0067)
+WIDE_RATIO = 0.9  # ratio test of the wide retry (COLMAP's default is 0.8) ...
+WIDE_MIN_INLIERS = 8  # ... and the inliers a verified pair needs (default 15)
+RETRY_BELOW = 0.9  # the wide retry runs only when fewer than this share are placed
 CHUNK = 4  # photos per feature-extraction call (a progress step)
+# Matching is done in about MATCH_STEPS calls (progress steps) of at least MATCH_CHUNK pairs:
+# each call costs about 0.1-0.2 s of its own (kermit's 55 pairs: 3.6 s in one call, 7.0 in 20)
+MATCH_STEPS, MATCH_CHUNK = 10, 40
 
 
 @dataclass(frozen=True)
 class SfmSettings:
     """How structure from motion runs."""
 
-    matcher: str = "exhaustive"  # "exhaustive" (photos) or "sequential" (video frames, by name)
+    # "auto" (by count and order: windowshop.photos.pairs), "exhaustive", "sequential" (video
+    # frames, by name) or "retrieval"
+    matcher: str = "auto"
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (working px)
     single_camera: bool = True  # all photos share one camera (same size and EXIF camera)
     seed: int = 0
@@ -55,6 +65,8 @@ class SfmResult:
     unplaced: list[str]
     keypoints: dict[str, int]  # image file name -> SIFT features found
     attempts: list[Attempt] = field(default_factory=list)
+    matcher: str = ""  # the matcher used
+    pairs: int = 0  # image pairs matched
 
 
 def quiet_logging(verbose: bool) -> None:
@@ -71,14 +83,20 @@ def _reader_options(settings: SfmSettings) -> pycolmap.ImageReaderOptions:
     return options
 
 
+def _extraction(wide: bool) -> pycolmap.FeatureExtractionOptions:
+    options = pycolmap.FeatureExtractionOptions()
+    if wide:
+        options.sift.peak_threshold = DENSE_PEAK
+        options.sift.estimate_affine_shape = True
+    return options
+
+
 def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSettings,
-            peak_threshold: float | None, advance) -> dict[str, int]:
+            wide: bool, advance) -> dict[str, int]:
     """SIFT features of `names` into `database`; returns the number of features per image."""
     mode = pycolmap.CameraMode.SINGLE if settings.single_camera else pycolmap.CameraMode.PER_IMAGE
     reader = _reader_options(settings)
-    extraction = pycolmap.FeatureExtractionOptions()
-    if peak_threshold is not None:
-        extraction.sift.peak_threshold = peak_threshold
+    extraction = _extraction(wide)
     for start in range(0, len(names), CHUNK):
         pycolmap.extract_features(database, image_dir, image_names=names[start:start + CHUNK],
                                   camera_mode=mode, reader_options=reader,
@@ -93,18 +111,40 @@ def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSett
                 for image in db.read_all_images()}
 
 
-def match(database: Path, settings: SfmSettings) -> None:
-    """Match every pair (photos) or each frame with its next few frames (video)."""
+def choose_pairs(image_dir: Path, names: list[str], matcher: str
+                 ) -> tuple[str, list[tuple[str, str]]]:
+    """(matcher, name pairs to match): "auto" becomes a matcher by count and order."""
+    descriptors = None
+    if matcher == "retrieval" or (matcher == "auto" and len(names) > pairs.EXHAUSTIVE_MAX):
+        descriptors = pairs.tiny_descriptors([image_dir / n for n in names])
+    if matcher == "auto":
+        matcher = pairs.choose(len(names), descriptors)
+    chosen = pairs.image_pairs(len(names), matcher, descriptors)
+    return matcher, [(names[i], names[j]) for i, j in chosen]
+
+
+def match(database: Path, work: Path, name_pairs: list[tuple[str, str]], settings: SfmSettings,
+          wide: bool, advance) -> None:
+    """Match and verify the image `name_pairs`, a chunk of pairs a call (`advance` per pair)."""
+    matching = pycolmap.FeatureMatchingOptions()
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = settings.seed
-    if settings.matcher == "sequential":
-        pairing = pycolmap.SequentialPairingOptions(overlap=SEQUENTIAL_OVERLAP,
-                                                    quadratic_overlap=False)
-        pycolmap.match_sequential(database, pairing_options=pairing, device=pycolmap.Device.cpu,
-                                  verification_options=verification)
-    else:
-        pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu,
-                                  verification_options=verification)
+    # matches that stay at the same pixel belong to the camera (dust, noise of a dark backdrop,
+    # a watermark), not the scene: two temple photos 225 degrees apart share 2248 of them
+    verification.filter_stationary_matches = True
+    if wide:
+        matching.sift.max_ratio = WIDE_RATIO
+        verification.min_num_inliers = WIDE_MIN_INLIERS
+    step = max(MATCH_CHUNK, -(-len(name_pairs) // MATCH_STEPS))
+    listing = work / "pairs.txt"
+    for start in range(0, len(name_pairs), step):
+        chunk = name_pairs[start:start + step]
+        listing.write_text("".join(f"{a} {b}\n" for a, b in chunk))
+        pycolmap.match_image_pairs(
+            database, matching_options=matching, verification_options=verification,
+            pairing_options=pycolmap.ImportedPairingOptions(match_list_path=listing),
+            device=pycolmap.Device.cpu)
+        advance(len(chunk))
 
 
 def mapping_options(settings: SfmSettings, relaxed: bool) -> pycolmap.IncrementalPipelineOptions:
@@ -157,22 +197,25 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
     pycolmap.set_random_seed(settings.seed)
     database = work / "database.db"
     best, attempts, keypoints = None, [], {}
-    plans = [("default", None, False), ("relaxed", None, True), ("dense", DENSE_PEAK, True)]
-    for i, (label, peak, relaxed) in enumerate(plans):
-        if peak is not None and _placed(best) >= DENSE_RETRY_BELOW * len(names):
+    matcher, name_pairs = choose_pairs(image_dir, names, settings.matcher)
+    plans = [("default", False, False), ("relaxed", False, True), ("wide", True, True)]
+    for i, (label, wide, relaxed) in enumerate(plans):
+        if wide and _placed(best) >= RETRY_BELOW * len(names):
             break  # nearly all placed: not worth extracting everything again
         start = time.perf_counter()
-        if i == 0 or peak is not None:  # (re)compute features and matches
+        suffix = "" if i == 0 else f" ({label})"
+        if i == 0 or wide:  # (re)compute features and matches
             database.unlink(missing_ok=True)
-            with stages.stage("finding features" + ("" if i == 0 else f" ({label})"),
-                              len(names)) as advance:
-                keypoints = extract(database, image_dir, names, settings, peak, advance)
+            with stages.stage("finding features" + suffix, len(names)) as advance:
+                keypoints = extract(database, image_dir, names, settings, wide, advance)
             if sum(k >= MIN_KEYPOINTS for k in keypoints.values()) < 3:
                 break  # nothing to match: the caller says why (too little texture)
-            with stages.stage("matching" + ("" if i == 0 else f" ({label})")):
-                match(database, settings)
-        with stages.stage("placing cameras" + ("" if i == 0 else f" ({label})"),
-                          len(names)) as advance:
+            if stages.show:
+                print(f"matching {len(name_pairs)} pairs of {len(names)} photos ({matcher})",
+                      file=sys.stderr)
+            with stages.stage("matching" + suffix, len(name_pairs)) as advance:
+                match(database, work, name_pairs, settings, wide, advance)
+        with stages.stage("placing cameras" + suffix, len(names)) as advance:
             model = map_once(database, image_dir, work / f"sparse_{label}", settings, relaxed,
                              advance)
         attempts.append(Attempt(label, _placed(model), time.perf_counter() - start))
@@ -183,4 +226,4 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
     placed = [] if best is None else sorted(im.name for im in best.images.values() if im.has_pose)
     return SfmResult(reconstruction=best, placed=placed,
                      unplaced=sorted(set(names) - set(placed)), keypoints=keypoints,
-                     attempts=attempts)
+                     attempts=attempts, matcher=matcher, pairs=len(name_pairs))

@@ -1,0 +1,71 @@
+"""Structure from motion pieces: matching in chunks that advance a progress bar, and poses from
+8 wide-baseline photos of dtu_skull against the dataset's own cameras."""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import cv2
+import numpy as np
+import pycolmap
+import pytest
+
+from windowshop.photos import sfm
+from windowshop.photos.align import rotation_angle
+from windowshop.photos.ingest import Dropped, read_photos
+from windowshop.photos.output import write_image
+from windowshop.photos.progress import Stages
+from shared_data import DATA
+
+# 8 of dtu_skull's 49 views spread evenly in azimuth over its ~100 degree arc (steps of about
+# 13 degrees), as bench/bench_fewphoto.py picks them
+SKULL_VIEWS = (5, 8, 10, 21, 24, 27, 33, 41)
+MAX_ROTATION_DEG = 3.0  # relative rotations of every placed pair against the dataset's
+
+
+def _images(tmp_path, paths, max_side=640):
+    photos = read_photos(paths, max_side, Dropped())
+    (tmp_path / "images").mkdir()
+    for photo in photos:
+        write_image(tmp_path, photo.name, photo.pixels)
+    return tmp_path / "images", [f"{p.name}.jpg" for p in photos]
+
+
+def test_matching_advances_progress_and_verifies_every_pair(tmp_path, monkeypatch):
+    image_dir, names = _images(tmp_path, sorted((DATA / "kermit").glob("*.jpg"))[:4], 320)
+    settings = sfm.SfmSettings()
+    database = tmp_path / "database.db"
+    sfm.extract(database, image_dir, names, settings, False, lambda n=1: None)
+    pairs = list(combinations(names, 2))
+    events = []
+    stages = Stages(on_stage=lambda stage, fraction: events.append(fraction), show=False,
+                    fractions={"matching": 1.0})
+    monkeypatch.setattr(sfm, "MATCH_CHUNK", 2)
+    with stages.stage("matching", len(pairs)) as advance:
+        sfm.match(database, tmp_path, pairs, settings, False, advance)
+    assert len(events) == 2 + len(pairs) // 2  # start, a report per chunk of 2 pairs, end
+    assert events == sorted(events) and events[0] == 0.0 and events[-1] == 1.0
+    with pycolmap.Database.open(database) as db:
+        assert len(db.read_two_view_geometry_num_inliers()[0]) >= len(pairs) - 1
+
+
+def _skull_rotations() -> dict[str, np.ndarray]:
+    """View name -> world-to-camera rotation (3, 3) from the dataset's projection matrices."""
+    cams = np.load(DATA / "dtu_skull" / "cameras_sphere.npz")
+    return {f"{i:03d}": cv2.decomposeProjectionMatrix(cams[f"world_mat_{i}"][:3])[1]
+            for i in SKULL_VIEWS}
+
+
+@pytest.mark.slow
+def test_eight_wide_baseline_skull_photos_are_placed_right(tmp_path):
+    paths = [DATA / "dtu_skull" / "images" / f"{i:03d}.jpg" for i in SKULL_VIEWS]
+    image_dir, names = _images(tmp_path, paths)
+    result = sfm.reconstruct(image_dir, names, tmp_path, sfm.SfmSettings(), Stages(show=False))
+    assert len(result.placed) >= 7, result.attempts
+    assert result.matcher == "exhaustive" and result.pairs == 28
+    truth = _skull_rotations()
+    got = {im.name[:-4]: im.cam_from_world().rotation.matrix()
+           for im in result.reconstruction.images.values() if im.has_pose}
+    errors = {(a, b): rotation_angle((got[a] @ got[b].T).T @ (truth[a] @ truth[b].T))
+              for a, b in combinations(sorted(got), 2)}
+    assert max(errors.values()) < MAX_ROTATION_DEG, errors

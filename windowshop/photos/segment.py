@@ -246,8 +246,9 @@ def see_through(silhouettes: list[np.ndarray], raw: list[np.ndarray], cameras: l
 def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:
     """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3): GrabCut in
     each photo, then again within the visual hull of the first round's masks."""
-    masks = [grabcut_mask(v, aabb) for v in views]
+    # OpenCV lets go of the GIL inside grabCut, so the photos are cut on every core at once
+    masks = parallel_map(lambda v: grabcut_mask(v, aabb), views)
     carved = carve(masks, [v.camera for v in views], aabb)
     if carved is None:
         return masks
-    return [refined_mask(v, m, s) for v, m, s in zip(views, masks, carved[0])]
+    return parallel_map(lambda vms: refined_mask(*vms), list(zip(views, masks, carved[0])))

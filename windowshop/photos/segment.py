@@ -23,6 +23,7 @@ from scipy import ndimage
 from windowshop.rays import project
 from windowshop.scene.cameras import box_corners
 from windowshop.scene.hull import GRID, hull_points
+from windowshop.scene.images import parallel_map
 from windowshop.scene.types import Camera
 
 ITERATIONS = 5  # GrabCut rounds

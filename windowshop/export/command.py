@@ -57,6 +57,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
+    from windowshop.export.photos import training_photos
     from windowshop.fit.checkpoint import load_run
 
     check_options(options)
@@ -80,22 +81,28 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
     depths = tuple(d * cell for d in BAKE_DEPTHS)
+    photos = training_photos(run, options.bake_views) if options.bake_views > 0 else None
+    lap("photos")
     uv = texture = None
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)
         lap("unwrap")
-        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths)
+        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths, photos, cell)
         lap("bake")
+        surface = unwrapped
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)
     else:
-        vertices, faces, normals = mesh.vertices, mesh.faces, vertex_normals(mesh)
+        surface, normals = mesh, vertex_normals(mesh)
+        vertices, faces = mesh.vertices, mesh.faces
     colours = None
     if vertex_colours or texture is None:
-        colours = np.round(255 * tex.field_colour(run.model, vertices, normals, depths))
+        colours = np.round(255 * tex.surface_colour(run.model, surface, vertices, normals, depths,
+                                                    photos, cell))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
-            "triangles": int(len(faces)), "texture": options.texture, "seconds": seconds}
+            "triangles": int(len(faces)), "texture": options.texture,
+            "photos": 0 if photos is None else len(photos.cameras), "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
                  normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),
                  uv=None if uv is None else uv.astype(np.float32), texture=texture,

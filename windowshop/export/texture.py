@@ -25,6 +25,7 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 
 from windowshop.export.mesh import Mesh, vertex_normals
+from windowshop.export.photos import Photos, blend_with_field, low_weight, project_photos
 from windowshop.model import RadianceModel
 
 AXES = np.concatenate([np.eye(3), -np.eye(3)])  # (6, 3) the directions charts face
@@ -166,14 +167,29 @@ def field_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
 
 
 def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
-                 depths: tuple[float, ...]) -> np.ndarray:
-    """(size, size, 3) uint8: the base-colour texture of `unwrapped` (see the module docstring),
-    its colours read at `depths` under the surface."""
+                 depths: tuple[float, ...], photos: Photos | None = None,
+                 tolerance: float = 0.0) -> np.ndarray:
+    """(size, size, 3) uint8: the base-colour texture of `unwrapped`: from the `photos` where they
+    see the surface (photos.py; `tolerance` its depth test's), else from the field (its colours
+    read at `depths` under the surface; see the module docstring)."""
     ids = rasterise(unwrapped.uv, unwrapped.faces, size)
     index, points, normals = texel_surface(unwrapped, ids)
     image = np.zeros((size * size, 3), dtype=np.float32)
-    image[index] = field_colour(model, points, normals, depths)
+    image[index] = surface_colour(model, unwrapped, points, normals, depths, photos, tolerance)
     empty = (ids < 0)
     nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     image = image.reshape(size, size, 3)[nearest[0], nearest[1]]
     return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def surface_colour(model: RadianceModel, mesh: Unwrapped | Mesh, points: np.ndarray,
+                   normals: np.ndarray, depths: tuple[float, ...], photos: Photos | None,
+                   tolerance: float) -> np.ndarray:
+    """(N, 3) in [0, 1]: the base colour at `points` (N, 3) of `mesh` with outward `normals`:
+    the photos' where they see it well enough, the field's where they do not (or no photos)."""
+    if photos is None:
+        return field_colour(model, points, normals, depths)
+    total, weight = project_photos(mesh.vertices, mesh.faces, points, normals, photos, tolerance)
+    low = low_weight(weight)
+    return blend_with_field(total, weight, field_colour(model, points[low], normals[low], depths),
+                            low)

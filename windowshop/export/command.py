@@ -57,6 +57,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
+    from windowshop.export.carve import carve_volume
     from windowshop.export.photos import training_photos
     from windowshop.fit.checkpoint import load_run
 
@@ -69,20 +70,24 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         seconds[stage], clock = round(now - clock, 3), now
 
     run = load_run(run_dir, device)
+    photos = training_photos(run)
+    lap("photos")
     aabb = np.asarray(run.bounds.aabb, dtype=np.float64)
     volume = sample_volume(run.model, aabb, options.resolution)
     lap("volume")
-    level, iou = choose_level(run.model, volume, torch.as_tensor(aabb, dtype=torch.float32,
-                                                                 device=volume.device),
-                              run.train_cameras, options.level_views)
+    box = torch.as_tensor(aabb, dtype=torch.float32, device=volume.device)
+    level, iou = choose_level(run.model, volume, box, run.train_cameras, options.level_views)
     lap("level")
+    masked = None if photos is None else photos.masked()
+    if masked is not None and masked.cameras and np.isfinite(level):
+        volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
+        lap("carve")
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     lap("mesh")
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
     depths = tuple(d * cell for d in BAKE_DEPTHS)
-    photos = training_photos(run, options.bake_views) if options.bake_views > 0 else None
-    lap("photos")
+    photos = photos.spread(options.bake_views) if photos and options.bake_views > 0 else None
     uv = texture = None
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)

@@ -2,18 +2,23 @@
 
 import numpy as np
 
-from export_helpers import square, top_camera
+from export_helpers import top_camera
 from windowshop.export.photos import (ENOUGH, Photos, blend_with_field, low_weight,
                                       project_photos, spread)
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
 
-def two_squares() -> tuple[np.ndarray, np.ndarray]:
-    """A 2x2 square at z = 0 and a 1x1 square over its middle at z = 1, both facing +z."""
-    far_v, far_f = square(0.0, 1.0)
-    near_v, near_f = square(1.0, 0.5)
-    return np.concatenate([far_v, near_v]), np.concatenate([far_f, near_f + 4])
+def samples(z: float, half: float) -> np.ndarray:
+    """(M, 3) points every 0.02 over the square |x|, |y| <= half at height z (many a pixel)."""
+    axis = np.arange(-half, half + 1e-9, 0.02)
+    x, y = np.meshgrid(axis, axis)
+    return np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], -1)
+
+
+def two_squares() -> np.ndarray:
+    """Samples of a 3x3 square at z = 0 and of a 1x1 square over its middle at z = 1."""
+    return np.concatenate([samples(0.0, 1.5), samples(1.0, 0.5)])
 
 
 def painted_photo(camera: Camera) -> np.ndarray:
@@ -25,34 +30,32 @@ def painted_photo(camera: Camera) -> np.ndarray:
 
 
 def test_an_occluded_point_takes_nothing_and_a_seen_one_its_own_pixel():
-    vertices, faces = two_squares()
     camera = top_camera(40)
     photos = Photos([camera], [painted_photo(camera)], [None])
     points = np.array([[0.0, 0.0, 0.0],  # the far square, under the near one: hidden
-                       [0.75, -0.55, 0.0],  # the far square, in the open
+                       [1.2, -1.2, 0.0],  # the far square, in the open
                        [0.1, 0.2, 1.0]])  # the near square
     normals = np.tile([0.0, 0.0, 1.0], (3, 1))
-    total, weight = project_photos(vertices, faces, points, normals, photos, tolerance=0.01)
+    total, weight = project_photos(points, normals, photos, 0.01, two_squares())
     assert weight[0] == 0.0
-    assert weight[1] > 0.9 and weight[2] > 0.9  # head-on, well inside the silhouettes
+    assert weight[1] > 0.5 and weight[2] > 0.5  # head-on, inside the silhouettes
     colour = total[1:] / weight[1:, None]
     # top_camera: fx = 40 at distance 4 (far) or 3 (near); x -> column, +y -> row up
-    expected_xy = np.array([[20 + 40 * 0.75 / 4, 20 + 40 * 0.55 / 4],
+    expected_xy = np.array([[20 + 40 * 1.2 / 4, 20 + 40 * 1.2 / 4],
                             [20 + 40 * 0.1 / 3, 20 - 40 * 0.2 / 3]])
     assert np.allclose(colour[:, :2] * 40, expected_xy, atol=1e-3)
 
 
 def test_a_surface_facing_away_takes_nothing():
-    vertices, faces = square(0.0, 1.0)
     camera = top_camera(40)
     photos = Photos([camera], [painted_photo(camera)], [None])
     point, down = np.array([[0.2, 0.2, 0.0]]), np.array([[0.0, 0.0, -1.0]])
-    _, weight = project_photos(vertices, faces, point, down, photos, tolerance=0.01)
+    _, weight = project_photos(point, down, photos, 0.01, samples(0.0, 1.0))
     assert weight[0] == 0.0
 
 
 def test_views_blend_by_weight_and_a_half_covered_pixel_lends_nothing():
-    vertices, faces = square(0.0, 1.0)
+    square = samples(0.0, 1.0)
     top = top_camera(40)
     tilted = look_at(np.array([0.0, -2.0, 2.0 * np.sqrt(3.0)]), np.zeros(3), np.array([0, 0, 1.0]))
     side = Camera(fx=40, fy=40, cx=20, cy=20, width=40, height=40, c2w=tilted)  # 30 degrees off
@@ -62,11 +65,11 @@ def test_views_blend_by_weight_and_a_half_covered_pixel_lends_nothing():
     blue[..., 2] = 1.0
     half = np.full((40, 40), 0.5, np.float32)
     point, up = np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]])
-    total, weight = project_photos(vertices, faces, point, up,
-                                   Photos([top, side], [red, blue], [None, None]), 0.01)
+    total, weight = project_photos(point, up, Photos([top, side], [red, blue], [None, None]), 0.01,
+                                   square)
     cos2 = np.cos(np.radians(30.0)) ** 2  # the weight of a view is cos^2 of its angle
     assert np.allclose(total[0] / weight[0], [1 / (1 + cos2), 0, cos2 / (1 + cos2)], atol=1e-4)
-    _, weight = project_photos(vertices, faces, point, up, Photos([top], [red], [half]), 0.01)
+    _, weight = project_photos(point, up, Photos([top], [red], [half]), 0.01, square)
     assert weight[0] == 0.0
 
 

@@ -16,6 +16,7 @@ import torch
 
 from windowshop.scene.types import Camera
 
+CARVE_VIEWS = 32  # masks carving the lattice, spread through the training views (more barely help)
 TOLERANCE = 0.05  # share of the views (and at least one) that may see a vertex on the background
 MASK_LEVEL = 0.5  # alpha above which a pixel is the object's
 

@@ -57,7 +57,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
-    from windowshop.export.carve import carve_volume
+    from windowshop.export.carve import CARVE_VIEWS, carve_volume
     from windowshop.export.photos import training_photos
     from windowshop.fit.checkpoint import load_run
 
@@ -78,7 +78,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     box = torch.as_tensor(aabb, dtype=torch.float32, device=volume.device)
     level, iou = choose_level(run.model, volume, box, run.train_cameras, options.level_views)
     lap("level")
-    masked = None if photos is None else photos.masked()
+    masked = None if photos is None else photos.masked().spread(CARVE_VIEWS)
     if masked is not None and masked.cameras and np.isfinite(level):
         volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
         lap("carve")
@@ -102,8 +102,9 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         vertices, faces = mesh.vertices, mesh.faces
     colours = None
     if vertex_colours or texture is None:
-        colours = np.round(255 * tex.surface_colour(run.model, surface, vertices, normals, depths,
-                                                    photos, cell))
+        occluders = None if photos is None else tex.surface_samples(surface)
+        colours = np.round(255 * tex.surface_colour(run.model, vertices, normals, depths, photos,
+                                                    cell, occluders))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
             "triangles": int(len(faces)), "texture": options.texture,

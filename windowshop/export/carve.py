@@ -16,7 +16,8 @@ import torch
 
 from windowshop.scene.types import Camera
 
-CARVE_VIEWS = 32  # masks carving the lattice, spread through the training views (more barely help)
+CARVE_VIEWS = 50  # masks carving the lattice, spread through the training views (lego: 32 of them
+# leave more of the haze under the plate, seen by the few low views only)
 TOLERANCE = 0.05  # share of the views (and at least one) that may see a vertex on the background
 MASK_LEVEL = 0.5  # alpha above which a pixel is the object's
 
@@ -55,5 +56,7 @@ def carve_volume(volume: torch.Tensor, aabb: torch.Tensor, level: float, cameras
     seen, background = background_votes(points, cameras, masks)
     empty = background > torch.clamp(TOLERANCE * seen, min=1.0)
     out = volume.clone()
-    out[tuple(candidates[empty].T)] = 0.0
+    # -level, not 0: between a vertex at density d and an emptied one the surface then crosses at
+    # (d - level) / (d + level) of the way, about midway, rather than next to the emptied vertex
+    out[tuple(candidates[empty].T)] = -level
     return out

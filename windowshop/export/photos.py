@@ -30,6 +30,7 @@ from windowshop.scene.types import Camera
 
 EDGE_PIXELS = 2.0  # the weight ramps from 0 at the mesh's silhouette to 1 this many pixels inside
 MIN_COS = 0.15  # surfaces seen more obliquely than this (about 81 degrees) take nothing
+COS_POWER = 2.0  # a view's weight: cos(normal, view) to this power
 SLOPE = 3.0  # surfaces up to this steep (tangent, about 72 degrees) are not occluding edges
 ENOUGH = 0.5  # texels whose photo weight is below this are topped up with the field's colour
 
@@ -156,7 +157,7 @@ def project_photos(points: np.ndarray, normals: np.ndarray, photos: Photos, tole
         slack = tolerance + 2 * z / camera.fx * torch.sqrt(1 - c * c) / c
         seen = z <= depth[px[:, 1], px[:, 0]] + slack
         index, xy = index[seen], xy[seen]
-        w = cos[index] ** 2 * _bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
+        w = cos[index] ** COS_POWER * _bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
         colour = _bilinear(torch.as_tensor(image, dtype=torch.float32), xy)
         total.index_add_(0, index, w[:, None] * colour)
         weight.index_add_(0, index, w)

@@ -197,7 +197,8 @@ def bake_size(unwrapped: Unwrapped, size: int, photos: Photos) -> int:
     a, b, c = (unwrapped.vertices[unwrapped.faces[:, i]] for i in range(3))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=-1).sum()
     ua, ub, uc = (unwrapped.uv[unwrapped.faces[:, i]] for i in range(3))
-    uv_area = 0.5 * np.abs(np.cross(ub - ua, uc - ua)).sum()
+    e1, e2 = ub - ua, uc - ua
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     texels = np.sqrt(uv_area / max(area, 1e-12)) * size  # texels per world unit, at `size`
     centre = unwrapped.vertices.mean(0)
     pixels = max(cam.fx / np.linalg.norm(cam.c2w[:3, 3] - centre) for cam in photos.cameras)

@@ -1,10 +1,13 @@
 """`windowshop export`: a run folder -> the object as GLB, USDZ or PLY, with its side file.
 
-    build_asset(run)  =  density lattice over the object's box (mesh.sample_volume)
+    build_asset(run)  =  the training photos, read again from the run's scene (photos.training_photos)
+                      -> density lattice over the object's box (mesh.sample_volume)
                       -> the surface's level from the field's silhouettes (level.choose_level)
+                      -> the lattice carved by the photos' masks, where they have any (carve)
                       -> marching cubes, largest pieces, decimation (mesh.object_mesh)
                       -> the model frame: +Y up, standing at the origin (frame.model_frame)
-                      -> UVs and the baked base colour (texture)
+                      -> UVs and the base colour baked from the photos, the field's where no
+                         photo sees the surface (texture, photos)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.

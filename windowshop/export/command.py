@@ -57,10 +57,10 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     """The object of the run at `run_dir` as an Asset (see the module docstring); vertex
     colours are baked too when asked for (PLY) or when there is no texture."""
     from windowshop.export import texture as tex
+    from windowshop.export.carve import CARVE_VIEWS, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
-    from windowshop.export.carve import CARVE_VIEWS, carve_volume
     from windowshop.export.photos import training_photos
     from windowshop.fit.checkpoint import load_run
 

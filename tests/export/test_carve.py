@@ -1,4 +1,4 @@
-"""Carving the lattice with masks: haze that the photos show as background goes, the object stays."""
+"""Carving the lattice with masks: haze the photos show as background goes, the object stays."""
 
 import numpy as np
 import torch
@@ -14,9 +14,11 @@ def ring_cameras(count: int = 8, size: int = 64) -> list[Camera]:
     """`count` cameras on a ring 3 units out, 20 degrees above the ball's equator, looking at it."""
     out = []
     for angle in np.linspace(0, 2 * np.pi, count, endpoint=False):
-        eye = 3.0 * np.array([np.cos(angle) * np.cos(0.35), np.sin(angle) * np.cos(0.35), np.sin(0.35)])
+        eye = 3.0 * np.array([np.cos(angle) * np.cos(0.35), np.sin(angle) * np.cos(0.35),
+                              np.sin(0.35)])
         c2w = look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))
-        out.append(Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size, c2w=c2w))
+        out.append(Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
+                          c2w=c2w))
     return out
 
 

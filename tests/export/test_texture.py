@@ -19,5 +19,6 @@ def test_photos_coarser_than_the_texels_bake_a_coarser_texture():
         camera = dataclasses.replace(top_camera(40), fx=4 * pixels_per_unit, fy=4 * pixels_per_unit)
         return Photos([camera], [np.zeros((40, 40, 3), np.float32)], [None])
 
-    assert bake_size(unwrapped, 2048, photo_with(texels / 6)) == 512  # 1.5 texels a pixel at 512, 0.75 at 256
+    # 1.5 texels a pixel at 512, 0.75 at 256
+    assert bake_size(unwrapped, 2048, photo_with(texels / 6)) == 512
     assert bake_size(unwrapped, 2048, photo_with(2 * texels)) == 2048  # finer photos: full size

@@ -43,17 +43,19 @@ class Photos:
     images: list[np.ndarray]  # (H, W, 3) float32 in [0, 1]
     alphas: list[np.ndarray | None]  # (H, W) float32 in [0, 1], None where the source has none
 
+    def pick(self, indices: list[int]) -> "Photos":
+        """The photos at `indices`."""
+        return Photos(cameras=[self.cameras[i] for i in indices],
+                      images=[self.images[i] for i in indices],
+                      alphas=[self.alphas[i] for i in indices])
+
     def spread(self, count: int) -> "Photos":
         """`count` of these photos spread evenly through them (all if fewer)."""
-        pick = spread(count, len(self.cameras))
-        return Photos(cameras=[self.cameras[i] for i in pick], images=[self.images[i] for i in pick],
-                      alphas=[self.alphas[i] for i in pick])
+        return self.pick(spread(count, len(self.cameras)))
 
     def masked(self) -> "Photos":
         """Only the photos that have an alpha mask."""
-        keep = [i for i, a in enumerate(self.alphas) if a is not None]
-        return Photos(cameras=[self.cameras[i] for i in keep], images=[self.images[i] for i in keep],
-                      alphas=[self.alphas[i] for i in keep])
+        return self.pick([i for i, a in enumerate(self.alphas) if a is not None])
 
 
 def training_photos(run) -> Photos | None:

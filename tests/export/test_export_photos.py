@@ -4,7 +4,6 @@ masks, and matches a photo better than the field's colour does."""
 import dataclasses
 
 import numpy as np
-import pytest
 
 from export_helpers import object_scene
 from windowshop.config import ExportOptions, FitConfig
@@ -19,7 +18,6 @@ from windowshop.scene.writer import write_transforms
 SMALL = ExportOptions(triangles=3000, texture=256, resolution=48)
 
 
-@pytest.mark.slow  # its own fit, from the scene written to disk
 def test_photos_colour_the_model_and_masks_carve_it(tmp_path):
     write_transforms(object_scene(), tmp_path / "scene")
     scene = load_scene(tmp_path / "scene")

@@ -6,7 +6,9 @@ speed:   lego_tiny.npz (100 views 100x100) trained --tiny-seconds, then `export 
 quality: lego 400x400 (--views held out) trained --lego-seconds, exported at the defaults; the
          GLB, read back with trimesh and put in the scene's frame through its side file, is drawn
          by windowshop.export.raster at each held-out camera: silhouette IoU against the true
-         alpha, PSNR against the true image (over white), beside the field's own PSNR there.
+         alpha, PSNR against the true image (over white), beside the field's own PSNR there;
+         PSNR also anti-aliased (SUPERSAMPLE^2 samples a pixel, as a 3D viewer draws it and as
+         the photos were rendered; the plain rasteriser samples pixel centres only).
 Usage: python bench/bench_export.py [--rows speed quality] [--tiny-seconds 30]
        [--lego-seconds 60] [--views 8] [--tiny-run RUN] [--lego-run RUN]
 """
@@ -37,6 +39,7 @@ from windowshop.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
+SUPERSAMPLE = 2  # samples a pixel side of the anti-aliased PSNR
 
 
 def trained(source: Path, options: SceneOptions, seconds: float, out: Path) -> tuple[Path, dict]:
@@ -61,6 +64,15 @@ def speed_row(run: Path, work: Path) -> dict:
     return row
 
 
+def supersampled(vertices: np.ndarray, faces: np.ndarray, camera, uv: np.ndarray,
+                 texture: np.ndarray, k: int) -> np.ndarray:
+    """(H, W, 3) the textured mesh drawn at `k` x `k` samples a pixel, averaged: anti-aliased,
+    as a viewer (model-viewer, Quick Look) draws it and as the photos were rendered."""
+    image, _ = render_mesh(vertices, faces, camera.resized(camera.width * k, camera.height * k),
+                           (1.0, 1.0, 1.0), uv=uv, texture=texture)
+    return image.reshape(camera.height, k, camera.width, k, 3).mean((1, 3))
+
+
 def quality_row(run_dir: Path, views: int, work: Path) -> dict:
     """The exported GLB of `run_dir` against its scene's held-out views (see the docstring)."""
     glb = work / "lego.glb"
@@ -73,20 +85,24 @@ def quality_row(run_dir: Path, views: int, work: Path) -> dict:
     uv = np.asarray(loaded.visual.uv).copy()
     uv[:, 1] = 1.0 - uv[:, 1]  # trimesh's v = 0 at the bottom; glTF's (and the rasteriser's) top
     texture = np.asarray(loaded.visual.material.baseColorTexture.convert("RGB"))
-    ious, mesh_psnr, field_psnr = [], [], []
+    ious, mesh_psnr, smooth_psnr, field_psnr = [], [], [], []
     for view in scene.split("test")[:views]:
         image, silhouette = render_mesh(vertices, np.asarray(loaded.faces), view.camera,
                                         (1.0, 1.0, 1.0), uv=uv, texture=texture)
         alpha = view.alpha > 0.5
         ious.append(float((alpha & silhouette).sum() / max((alpha | silhouette).sum(), 1)))
         mesh_psnr.append(psnr(image, view.image))
+        smooth_psnr.append(psnr(supersampled(vertices, np.asarray(loaded.faces), view.camera, uv,
+                                             texture, SUPERSAMPLE), view.image))
         field_psnr.append(psnr(render_camera(run.model, view.camera).rgb, view.image))
     return {"row": "quality", "run": str(run_dir), "step": run.step, "views": len(ious),
             "silhouette_iou": round(float(np.mean(ious)), 4),
             "silhouette_iou_min": round(float(np.min(ious)), 4),
             "mesh_psnr": round(float(np.mean(mesh_psnr)), 2),
+            f"mesh_psnr_ssaa{SUPERSAMPLE}": round(float(np.mean(smooth_psnr)), 2),
             "field_psnr": round(float(np.mean(field_psnr)), 2),
             "level": asset.info["level"], "level_iou": asset.info["silhouette_iou"],
+            "photos": asset.info["photos"],
             "triangles": asset.info["triangles"], "glb_mb": round(glb.stat().st_size / 1e6, 2),
             "export_seconds": asset.info["seconds"]}
 

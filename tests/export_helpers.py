@@ -5,7 +5,9 @@ import dataclasses
 
 import numpy as np
 
+from windowshop.scene.cameras import look_at
 from windowshop.scene.synthetic import synthetic_scene
+from windowshop.scene.types import Camera
 
 # source frame -> normalised frame: a turn about x, a scale and a shift (a similarity)
 TURN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -20,3 +22,15 @@ def object_scene():
     scene.views = [dataclasses.replace(v, stored_camera=scene.source_camera(v.camera))
                    for v in scene.views]
     return scene
+
+
+def square(z: float, half: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two triangles making the square |x|, |y| <= half at height z (facing +z)."""
+    v = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]])
+    return v, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def top_camera(size: int = 40) -> Camera:
+    """Looking straight down from z = 4 with a focal length of `size` pixels."""
+    c2w = look_at(np.array([0.0, 0.0, 4.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    return Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size, c2w=c2w)

@@ -174,6 +174,7 @@ class ExportOptions:
     size_cm: float | None = None  # scale the object to this real height (None: the scene's own units)
     resolution: int = 256  # marching-cubes cells along the longest side of the object's box
     level_views: int = 8  # training views whose silhouettes choose the surface's density level
+    bake_views: int = 24  # training photos projected onto the mesh for its colour (0: the field's)
     keep_share: float = 0.05  # pieces under this share of the largest piece's area are dropped
     roughness: float = 0.8  # of the PBR material (never metallic)
 

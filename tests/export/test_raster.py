@@ -2,21 +2,8 @@
 
 import numpy as np
 
+from export_helpers import square, top_camera
 from windowshop.export.raster import render_mesh
-from windowshop.scene.cameras import look_at
-from windowshop.scene.types import Camera
-
-
-def square(z: float, half: float) -> tuple[np.ndarray, np.ndarray]:
-    """Two triangles making the square |x|, |y| <= half at height z (facing +z)."""
-    v = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]])
-    return v, np.array([[0, 1, 2], [0, 2, 3]])
-
-
-def top_camera(size: int = 40) -> Camera:
-    """Looking straight down from z = 4 with a focal length of `size` pixels."""
-    c2w = look_at(np.array([0.0, 0.0, 4.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
-    return Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size, c2w=c2w)
 
 
 def test_a_square_covers_the_pixels_its_projection_covers():

@@ -1,10 +1,13 @@
 """`windowshop export`: a run folder -> the object as GLB, USDZ or PLY, with its side file.
 
-    build_asset(run)  =  density lattice over the object's box (mesh.sample_volume)
+    build_asset(run)  =  the training photos, read again from the run's scene (photos.training_photos)
+                      -> density lattice over the object's box (mesh.sample_volume)
                       -> the surface's level from the field's silhouettes (level.choose_level)
+                      -> the lattice carved by the photos' masks, where they have any (carve)
                       -> marching cubes, largest pieces, decimation (mesh.object_mesh)
                       -> the model frame: +Y up, standing at the origin (frame.model_frame)
-                      -> UVs and the baked base colour (texture)
+                      -> UVs and the base colour baked from the photos, the field's where no
+                         photo sees the surface (texture, photos)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.
@@ -54,9 +57,11 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     """The object of the run at `run_dir` as an Asset (see the module docstring); vertex
     colours are baked too when asked for (PLY) or when there is no texture."""
     from windowshop.export import texture as tex
+    from windowshop.export.carve import CARVE_VIEWS, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
+    from windowshop.export.photos import training_photos
     from windowshop.fit.checkpoint import load_run
 
     check_options(options)
@@ -68,34 +73,45 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         seconds[stage], clock = round(now - clock, 3), now
 
     run = load_run(run_dir, device)
+    photos = training_photos(run)
+    lap("photos")
     aabb = np.asarray(run.bounds.aabb, dtype=np.float64)
     volume = sample_volume(run.model, aabb, options.resolution)
     lap("volume")
-    level, iou = choose_level(run.model, volume, torch.as_tensor(aabb, dtype=torch.float32,
-                                                                 device=volume.device),
-                              run.train_cameras, options.level_views)
+    box = torch.as_tensor(aabb, dtype=torch.float32, device=volume.device)
+    level, iou = choose_level(run.model, volume, box, run.train_cameras, options.level_views)
     lap("level")
+    masked = None if photos is None else photos.masked().spread(CARVE_VIEWS)
+    if masked is not None and masked.cameras and np.isfinite(level):
+        volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
+        lap("carve")
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     lap("mesh")
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
     depths = tuple(d * cell for d in BAKE_DEPTHS)
+    photos = photos.spread(options.bake_views) if photos and options.bake_views > 0 else None
     uv = texture = None
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)
         lap("unwrap")
-        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths)
+        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths, photos, cell)
         lap("bake")
+        surface = unwrapped
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)
     else:
-        vertices, faces, normals = mesh.vertices, mesh.faces, vertex_normals(mesh)
+        surface, normals = mesh, vertex_normals(mesh)
+        vertices, faces = mesh.vertices, mesh.faces
     colours = None
     if vertex_colours or texture is None:
-        colours = np.round(255 * tex.field_colour(run.model, vertices, normals, depths))
+        occluders = None if photos is None else tex.surface_samples(surface)
+        colours = np.round(255 * tex.surface_colour(run.model, vertices, normals, depths, photos,
+                                                    cell, occluders))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
-            "triangles": int(len(faces)), "texture": options.texture, "seconds": seconds}
+            "triangles": int(len(faces)), "texture": options.texture,
+            "photos": 0 if photos is None else len(photos.cameras), "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
                  normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),
                  uv=None if uv is None else uv.astype(np.float32), texture=texture,

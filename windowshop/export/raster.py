@@ -29,7 +29,7 @@ class Raster:
     bary: torch.Tensor  # (H, W, 3) perspective-correct barycentric weights of that face
 
 
-def _screen(vertices: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
+def screen(vertices: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """Pixel coordinates (V, 2) (pixel centres at +0.5) and depths (V,) of world `vertices`."""
     w2c = torch.linalg.inv(torch.as_tensor(camera.c2w, dtype=torch.float64)).to(vertices)
     local = vertices @ w2c[:3, :3].T + w2c[:3, 3]
@@ -57,7 +57,7 @@ def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
               near: float = 1e-3) -> Raster:
     """The faces (F, 3) of `vertices` (V, 3) that `camera` sees at each pixel centre."""
     h, w = camera.height, camera.width
-    xy, depth = _screen(vertices, camera)
+    xy, depth = screen(vertices, camera)
     tri_xy, tri_depth = xy[faces], depth[faces]  # (F, 3, 2), (F, 3)
     front = (tri_depth > near).all(-1)
     lo = torch.ceil(tri_xy.amin(1) - 0.5).clamp(min=0)
@@ -91,8 +91,8 @@ def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
     pixels = hit.nonzero()[:, 0]
     f = face[pixels]
     centre = torch.stack([pixels % w, pixels // w], -1).to(xy) + 0.5
-    screen = _edge_weights(tri_xy[f], centre) / tri_depth[f]
-    bary[pixels] = screen / screen.sum(-1, keepdim=True)
+    weights = _edge_weights(tri_xy[f], centre) / tri_depth[f]
+    bary[pixels] = weights / weights.sum(-1, keepdim=True)
     return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
 
 

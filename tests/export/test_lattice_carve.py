@@ -1,0 +1,48 @@
+"""Carving the lattice with masks: haze the photos show as background goes, the object stays."""
+
+import numpy as np
+import torch
+
+from windowshop.export.carve import carve_volume
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+
+RADIUS = 0.5  # the object: a ball at the origin
+
+
+def ring_cameras(count: int = 8, size: int = 64) -> list[Camera]:
+    """`count` cameras on a ring 3 units out, 20 degrees above the ball's equator, looking at it."""
+    out = []
+    for angle in np.linspace(0, 2 * np.pi, count, endpoint=False):
+        eye = 3.0 * np.array([np.cos(angle) * np.cos(0.35), np.sin(angle) * np.cos(0.35),
+                              np.sin(0.35)])
+        c2w = look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))
+        out.append(Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
+                          c2w=c2w))
+    return out
+
+
+def ball_mask(camera: Camera) -> np.ndarray:
+    """(H, W) 1 where the pixel centre's ray passes within RADIUS of the origin, else 0."""
+    rows, cols = np.mgrid[0:camera.height, 0:camera.width] + 0.5
+    dirs = np.stack([(cols - camera.cx) / camera.fx, -(rows - camera.cy) / camera.fy,
+                     -np.ones_like(rows)], -1) @ camera.c2w[:3, :3].T
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    origin = camera.c2w[:3, 3]
+    closest = np.linalg.norm(np.cross(dirs, -origin), axis=-1)  # distance of the ray to the origin
+    return (closest < RADIUS).astype(np.float32)
+
+
+def test_haze_the_masks_see_as_background_is_emptied_and_the_ball_kept():
+    n = 41
+    axis = torch.linspace(-1, 1, n)
+    x, y, z = torch.meshgrid(axis, axis, axis, indexing="ij")
+    ball = (x**2 + y**2 + z**2).sqrt() < RADIUS - 0.05
+    haze = ((z + 0.75).abs() < 0.03) & (x.abs() < 0.8) & (y.abs() < 0.8)  # a sheet under the ball
+    volume = 10.0 * ball.float() + 5.0 * haze.float()
+    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    cameras = ring_cameras()
+    carved = carve_volume(volume, aabb, 1.0, cameras, [ball_mask(c) for c in cameras])
+    assert torch.equal(carved[ball], volume[ball])
+    assert bool((carved[haze] < 0).all())
+    assert torch.equal(carved[~ball & ~haze], volume[~ball & ~haze])  # below the level: untouched

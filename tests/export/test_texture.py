@@ -1,0 +1,24 @@
+"""The texture's bake size follows the photos' resolution on the object."""
+
+import dataclasses
+
+import numpy as np
+
+from export_helpers import square, top_camera
+from windowshop.export.photos import Photos
+from windowshop.export.texture import Unwrapped, bake_size
+
+
+def test_photos_coarser_than_the_texels_bake_a_coarser_texture():
+    vertices, faces = square(0.0, 0.5)  # one world unit square, 4 units from the camera
+    uv = np.array([[0.0, 0.5], [0.5, 0.5], [0.5, 0.0], [0.0, 0.0]])  # a quarter of the texture
+    unwrapped = Unwrapped(vertices, faces, np.tile([0.0, 0.0, 1.0], (4, 1)), uv)
+    texels = 1024  # a side of 2048 texels, half of it across one unit
+
+    def photo_with(pixels_per_unit: float) -> Photos:
+        camera = dataclasses.replace(top_camera(40), fx=4 * pixels_per_unit, fy=4 * pixels_per_unit)
+        return Photos([camera], [np.zeros((40, 40, 3), np.float32)], [None])
+
+    # 1.5 texels a pixel at 512, 0.75 at 256
+    assert bake_size(unwrapped, 2048, photo_with(texels / 6)) == 512
+    assert bake_size(unwrapped, 2048, photo_with(2 * texels)) == 2048  # finer photos: full size

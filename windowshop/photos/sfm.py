@@ -6,8 +6,9 @@ Attempts, each kept only if it places more photos than the ones before:
 2. a relaxed mapper (fewer matches and inliers needed to start a model and to add a view) -
    sparse rings such as the Middlebury temple split into two models without it;
 3. "wide": features for wide baselines, matched again, with the relaxed mapper: denser SIFT (a
-   lower peak threshold) with affine-adapted shapes (features that survive the foreshortening
-   of a 30-45 degree step), a looser ratio test and fewer inliers needed for a pair. (Guided
+   lower peak threshold) and fewer inliers needed for a pair; for small sets (WIDE_MAX_PHOTOS)
+   also affine-adapted shapes (features that survive the foreshortening of a 30-45 degree step)
+   and a looser ratio test. (Guided
    matching placed no more of bench_fewphoto's sets and doubled the matching time.)
 Pairs are matched in chunks (windowshop.photos.pairs picks them), so matching shows progress.
 pycolmap's own logging (glog) stays quiet unless `verbose`.
@@ -30,6 +31,10 @@ DENSE_PEAK = 0.002  # SIFT peak threshold of the wide retry (COLMAP's default is
 WIDE_RATIO = 0.9  # ratio test of the wide retry (COLMAP's default is 0.8) ...
 WIDE_MIN_INLIERS = 8  # ... and the inliers a verified pair needs (default 15)
 RETRY_BELOW = 0.9  # the wide retry runs only when fewer than this share are placed
+# Affine shapes and the looser ratio test only for sets this small, whose steps between photos are
+# wide: on 20 of fruit's photos they tripled the retry (matching 17 s -> 52 s: RANSAC on more
+# outliers) to place the same 20; on 8 photos they place more (temple 3 -> 4, dtu_skull 7 -> 8)
+WIDE_MAX_PHOTOS = 12
 CHUNK = 4  # photos per feature-extraction call (a progress step)
 # Matching is done in about MATCH_STEPS calls (progress steps) of at least MATCH_CHUNK pairs:
 # each call costs about 0.1-0.2 s of its own (kermit's 55 pairs: 3.6 s in one call, 7.0 in 20)
@@ -83,11 +88,11 @@ def _reader_options(settings: SfmSettings) -> pycolmap.ImageReaderOptions:
     return options
 
 
-def _extraction(wide: bool) -> pycolmap.FeatureExtractionOptions:
+def _extraction(wide: bool, affine: bool) -> pycolmap.FeatureExtractionOptions:
     options = pycolmap.FeatureExtractionOptions()
     if wide:
         options.sift.peak_threshold = DENSE_PEAK
-        options.sift.estimate_affine_shape = True
+        options.sift.estimate_affine_shape = affine
     return options
 
 
@@ -96,7 +101,7 @@ def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSett
     """SIFT features of `names` into `database`; returns the number of features per image."""
     mode = pycolmap.CameraMode.SINGLE if settings.single_camera else pycolmap.CameraMode.PER_IMAGE
     reader = _reader_options(settings)
-    extraction = _extraction(wide)
+    extraction = _extraction(wide, len(names) <= WIDE_MAX_PHOTOS)
     for start in range(0, len(names), CHUNK):
         pycolmap.extract_features(database, image_dir, image_names=names[start:start + CHUNK],
                                   camera_mode=mode, reader_options=reader,
@@ -133,8 +138,9 @@ def match(database: Path, work: Path, name_pairs: list[tuple[str, str]], setting
     # a watermark), not the scene: two temple photos 225 degrees apart share 2248 of them
     verification.filter_stationary_matches = True
     if wide:
-        matching.sift.max_ratio = WIDE_RATIO
         verification.min_num_inliers = WIDE_MIN_INLIERS
+    if wide and len({name for pair in name_pairs for name in pair}) <= WIDE_MAX_PHOTOS:
+        matching.sift.max_ratio = WIDE_RATIO
     step = max(MATCH_CHUNK, -(-len(name_pairs) // MATCH_STEPS))
     listing = work / "pairs.txt"
     for start in range(0, len(name_pairs), step):

@@ -37,8 +37,9 @@ RETRY_BELOW = 0.9  # the wide retry runs only when fewer than this share are pla
 WIDE_MAX_PHOTOS = 12
 CHUNK = 4  # photos per feature-extraction call (a progress step)
 # Matching is done in about MATCH_STEPS calls (progress steps) of at least MATCH_CHUNK pairs:
-# each call costs about 0.1-0.2 s of its own (kermit's 55 pairs: 3.6 s in one call, 7.0 in 20)
-MATCH_STEPS, MATCH_CHUNK = 10, 40
+# each call reads its photos' features again (kermit's 55 pairs: 3.6 s in one call, 7.0 in 20;
+# fruit's 190 dense pairs: 14.2 s in one, 18.6 in five)
+MATCH_STEPS, MATCH_CHUNK = 10, 100
 
 
 @dataclass(frozen=True)

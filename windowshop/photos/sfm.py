@@ -6,9 +6,9 @@ Attempts, each kept only if it places more photos than the ones before:
 2. a relaxed mapper (fewer matches and inliers needed to start a model and to add a view) -
    sparse rings such as the Middlebury temple split into two models without it;
 3. "wide": features for wide baselines, matched again, with the relaxed mapper: denser SIFT (a
-   lower peak threshold) and fewer inliers needed for a pair; for small sets (WIDE_MAX_PHOTOS)
-   also affine-adapted shapes (features that survive the foreshortening of a 30-45 degree step)
-   and a looser ratio test. (Guided
+   lower peak threshold); for small sets (WIDE_MAX_PHOTOS) also affine-adapted shapes (features
+   that survive the foreshortening of a 30-45 degree step), a looser ratio test and fewer inliers
+   needed for a pair. (Guided
    matching placed no more of bench_fewphoto's sets and doubled the matching time.)
 Pairs are matched in chunks (windowshop.photos.pairs picks them), so matching shows progress.
 pycolmap's own logging (glog) stays quiet unless `verbose`.
@@ -31,7 +31,7 @@ DENSE_PEAK = 0.002  # SIFT peak threshold of the wide retry (COLMAP's default is
 WIDE_RATIO = 0.9  # ratio test of the wide retry (COLMAP's default is 0.8) ...
 WIDE_MIN_INLIERS = 8  # ... and the inliers a verified pair needs (default 15)
 RETRY_BELOW = 0.9  # the wide retry runs only when fewer than this share are placed
-# Affine shapes and the looser ratio test only for sets this small, whose steps between photos are
+# Affine shapes, the looser ratio test and fewer inliers only for sets this small, whose steps between photos are
 # wide: on 20 of fruit's photos they tripled the retry (matching 17 s -> 52 s: RANSAC on more
 # outliers) to place the same 20; on 8 photos they place more (temple 3 -> 4, dtu_skull 7 -> 8)
 WIDE_MAX_PHOTOS = 12
@@ -138,10 +138,9 @@ def match(database: Path, work: Path, name_pairs: list[tuple[str, str]], setting
     # matches that stay at the same pixel belong to the camera (dust, noise of a dark backdrop,
     # a watermark), not the scene: two temple photos 225 degrees apart share 2248 of them
     verification.filter_stationary_matches = True
-    if wide:
-        verification.min_num_inliers = WIDE_MIN_INLIERS
     if wide and len({name for pair in name_pairs for name in pair}) <= WIDE_MAX_PHOTOS:
         matching.sift.max_ratio = WIDE_RATIO
+        verification.min_num_inliers = WIDE_MIN_INLIERS
     step = max(MATCH_CHUNK, -(-len(name_pairs) // MATCH_STEPS))
     listing = work / "pairs.txt"
     for start in range(0, len(name_pairs), step):

@@ -21,6 +21,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+from provenance import emit
 
 from windowshop.photos.align import rotation_angle
 from windowshop.photos.ingest import Dropped, read_photos
@@ -144,10 +145,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             results[name] = place(SETS[name](args.count), args.max_side, Path(tmp))
         print(name, results[name], flush=True)
-    text = json.dumps(results, indent=2)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    emit(results, args.out)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from provenance import emit
 
 from windowshop.config import PrepareOptions
 from windowshop.photos.align import pose_errors
@@ -96,10 +97,7 @@ def main() -> None:
                 "model": settings.model, "train_seconds": settings.fit.seconds,
                 "frames": settings.render.frames, "frame_size": settings.render.width,
                 "held_out_psnr": video.metrics.get("psnr")}
-    text = json.dumps(results, indent=2)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    emit(results, args.out)
 
 
 if __name__ == "__main__":

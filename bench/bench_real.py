@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from provenance import commit
+from provenance import commit, emit
 from windowshop.config import PipelineConfig, VideoOptions
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
@@ -146,10 +146,7 @@ def main() -> None:
             except Exception as err:  # noqa: BLE001 - a capture that fails is a result too
                 results["rows"][name] = {"error": f"{type(err).__name__}: {err}"}
             print(json.dumps({name: results["rows"][name]}), flush=True)
-    text = json.dumps(results, indent=2)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
+    emit(results, args.out)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,11 @@
-"""Where a bench row ran: the commit and the machine, printed beside every figure."""
+"""Where a bench row ran: the commit and the machine, printed beside every figure; and the
+whole result printed and kept."""
 
 from __future__ import annotations
 
 import os
 import platform
+import json
 import subprocess
 import time
 from pathlib import Path
@@ -28,3 +30,11 @@ def machine() -> dict:
             "cpu": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
             "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
             "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+def emit(results: dict, out: str | None) -> None:
+    """Print `results` as indented JSON, and write it to `out` too when given."""
+    text = json.dumps(results, indent=2)
+    print(text)
+    if out:
+        Path(out).write_text(text + "\n")

@@ -231,7 +231,7 @@ def turntable(model, scene):
     result, its `render_seconds` included)."""
     model = model.eval()
     options = VideoOptions(frames=120, width=256, height=256)
-    cameras = turntable_path([v.camera for v in scene.split("train")], options)
+    cameras = turntable_path([v.camera for v in scene.split("train")], options, model.bounds)
     with tempfile.TemporaryDirectory() as out:
         result = render_turntable(model, cameras, VideoOutputs(mp4=Path(out) / "turntable.mp4"),
                                   options.fps, display_background(scene.background),
@@ -273,7 +273,7 @@ def row_profile(args, device):
             stats = train_step(run, bank, background)
         train_ms = (time.perf_counter() - start) / steps * 1e3
     cameras = turntable_path([v.camera for v in scene.split("train")],
-                             VideoOptions(frames=3, width=256, height=256))
+                             VideoOptions(frames=3, width=256, height=256), model.bounds)
     model.eval()
     with profile(activities=[ProfilerActivity.CPU]) as render_prof:
         start = time.perf_counter()

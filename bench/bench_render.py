@@ -54,7 +54,8 @@ def train_briefly(name: str, preset: str | None, budget: FitConfig, out: Path, d
 def time_run(run_dir: Path, size: int, frames: int, device) -> dict:
     """Render `frames` orbit frames of `size` px from a run folder into an MP4; speed figures."""
     run = load_run(run_dir, device)
-    cameras = turntable_path(run.train_cameras, VideoOptions(frames=frames, width=size, height=size))
+    cameras = turntable_path(run.train_cameras, VideoOptions(frames=frames, width=size, height=size),
+                             run.model.bounds)
     background = display_background(run.background)
     render_camera(run.model, cameras[0].resized(32, 32), background)  # warm up kernels and caches
     if torch.cuda.is_available() and str(device).startswith("cuda"):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from windowshop.export.raster import screen
 from windowshop.scene.types import Camera
 
 CARVE_VIEWS = 50  # masks carving the lattice, spread through the training views (lego: 32 of them
@@ -30,14 +31,9 @@ def background_votes(points: torch.Tensor, cameras: list[Camera],
     seen = torch.zeros(len(points), dtype=torch.int32, device=points.device)
     background = torch.zeros_like(seen)
     for camera, mask in zip(cameras, masks):
-        w2c = torch.linalg.inv(torch.as_tensor(camera.c2w, dtype=torch.float64)).to(points)
-        local = points @ w2c[:3, :3].T + w2c[:3, 3]
-        depth = -local[:, 2]
-        front = depth > 1e-9
-        depth = torch.where(front, depth, torch.ones_like(depth))
-        u = torch.floor(camera.fx * local[:, 0] / depth + camera.cx).long()
-        v = torch.floor(-camera.fy * local[:, 1] / depth + camera.cy).long()
-        inside = front & (u >= 0) & (v >= 0) & (u < mask.shape[1]) & (v < mask.shape[0])
+        xy, depth = screen(points, camera)
+        u, v = torch.floor(xy).long().unbind(-1)
+        inside = (depth > 1e-9) & (u >= 0) & (v >= 0) & (u < mask.shape[1]) & (v < mask.shape[0])
         fg = torch.as_tensor(mask > MASK_LEVEL, device=points.device)
         hit = torch.zeros_like(inside)
         hit[inside] = fg[v[inside], u[inside]]

@@ -40,8 +40,7 @@ from provenance import machine
 from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
-from windowshop.fit.trainer import (Progress, TrainingRun, carve_to_scene, masked_training,
-                                     train_step, training_pixels)
+from windowshop.fit.trainer import Progress, TrainingRun, carve_to_scene, train_step, training_pixels
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -84,7 +83,7 @@ def start_run(scene, name: str, config, seconds: float, device: torch.device):
     torch.manual_seed(0)
     config = model_class(name).for_scene(config, scene)
     model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
-    carve_to_scene(model, scene, masked_training(scene, config))
+    carve_to_scene(model, scene)
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group["initial_lr"] = group["lr"]
@@ -205,7 +204,7 @@ def row_carve(args, device):
     seconds, probe, runs = args.seconds or 30.0, Probe(scene, device), []
     config = model_class("fast").for_scene(model_config("fast"), scene)
     start = time.perf_counter()  # the carve itself, once per fit before training (not counted)
-    carve_to_scene(model_class("fast")(config, Bounds.of_scene(scene)), scene, True)
+    carve_to_scene(model_class("fast")(config, Bounds.of_scene(scene)), scene)
     carve_seconds = time.perf_counter() - start
     for carve in (False, True):
         load = os.getloadavg()

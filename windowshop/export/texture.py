@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import torch
 from scipy import ndimage, sparse
@@ -188,8 +189,6 @@ def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
     nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     image = image.reshape(bake, bake, 3)[nearest[0], nearest[1]]
     if bake < size:
-        import cv2
-
         image = cv2.resize(image, (size, size), interpolation=cv2.INTER_LINEAR)
     return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 

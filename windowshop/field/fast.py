@@ -76,7 +76,8 @@ def with_priors(config: FastConfig, photos: int | None) -> FastConfig:
     photos (None: not known, so not few)."""
     few = photos is not None and photos <= config.few_views
     distortion = (0.01 if few else 0.0) if config.distortion is None else config.distortion
-    return replace(config, distortion=distortion, masked=few if config.masked is None else config.masked)
+    masked = few if config.masked is None else config.masked
+    return replace(config, distortion=distortion, masked=masked)
 
 
 class FastModel(RadianceModel):

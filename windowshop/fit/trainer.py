@@ -118,7 +118,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         progress = _restore(model, optimizer, resume)  # with the carve it was trained with
     else:
         progress = Progress()
-        carve_to_scene(model, scene, masked_training(scene, model_config))
+        carve_to_scene(model, scene)
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
@@ -179,12 +179,12 @@ def training_pixels(scene: Scene, model_config: Any, device) -> tuple[PixelBank,
     return PixelBank(views, device, use_alpha=True, over=over), "alpha"
 
 
-def carve_to_scene(model: RadianceModel, scene: Scene, masked: bool) -> None:
+def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
     """Confine a model that can be carved (and is asked to) to the visual hull of the scene's
-    training masks (at its `carve_cells`) when it trains on the object alone (`masked`); scenes
-    without masks stay whole, and so does a model whose masks leave nothing (better floaters than
-    no object at all)."""
-    if not getattr(model.config, "carve", False) or not masked:
+    training masks (at its `carve_cells`) when it trains on the object alone (masked_training);
+    scenes without masks stay whole, and so does a model whose masks leave nothing (better
+    floaters than no object at all)."""
+    if not getattr(model.config, "carve", False) or not masked_training(scene, model.config):
         return
     views = [v for v in scene.split("train") if v.alpha is not None]
     if not views:

@@ -31,9 +31,10 @@ DENSE_PEAK = 0.002  # SIFT peak threshold of the wide retry (COLMAP's default is
 WIDE_RATIO = 0.9  # ratio test of the wide retry (COLMAP's default is 0.8) ...
 WIDE_MIN_INLIERS = 8  # ... and the inliers a verified pair needs (default 15)
 RETRY_BELOW = 0.9  # the wide retry runs only when fewer than this share are placed
-# Affine shapes, the looser ratio test and fewer inliers only for sets this small, whose steps between photos are
-# wide: on 20 of fruit's photos they tripled the retry (matching 17 s -> 52 s: RANSAC on more
-# outliers) to place the same 20; on 8 photos they place more (temple 3 -> 4, dtu_skull 7 -> 8)
+# Affine shapes, the looser ratio test and fewer inliers only for sets this small, whose steps
+# between photos are wide: on 20 of fruit's photos they tripled the retry (matching 17 s -> 52 s:
+# RANSAC on more outliers) to place the same 20; on 8 photos they place more (temple 3 -> 4,
+# dtu_skull 7 -> 8)
 WIDE_MAX_PHOTOS = 12
 CHUNK = 4  # photos per feature-extraction call (a progress step)
 # Matching is done in about MATCH_STEPS calls (progress steps) of at least MATCH_CHUNK pairs:

@@ -89,7 +89,8 @@ def straight_colour(premultiplied: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     (a premultiplied edge pixel would be darkened twice). Resampling is done premultiplied first,
     so no colour of a transparent pixel leaks in; fully transparent pixels get black."""
     a = alpha[..., None]
-    return np.where(a > 0, premultiplied / np.maximum(a, 1e-6), 0.0).clip(0.0, 1.0).astype(premultiplied.dtype)
+    straight = np.where(a > 0, premultiplied / np.maximum(a, 1e-6), 0.0)
+    return straight.clip(0.0, 1.0).astype(premultiplied.dtype)
 
 
 def _silhouette(view: View, source: Source) -> np.ndarray | None:

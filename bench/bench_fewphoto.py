@@ -23,15 +23,18 @@ from pathlib import Path
 import numpy as np
 from provenance import emit
 
-from windowshop.photos.align import rotation_angle
+from windowshop.photos.align import rotation_angle, umeyama
 from windowshop.photos.ingest import Dropped, read_photos
-from windowshop.photos.output import write_image
+from windowshop.photos.output import posed_photos, write_image
 from windowshop.photos.progress import Stages
 from windowshop.photos.sfm import SfmSettings, reconstruct
 from windowshop.scene import read_source
+from windowshop.scene.cameras import nearest_point_to_axes, opencv_w2c_to_gl_c2w
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-Truth = dict[Path, np.ndarray]  # photo -> world-to-camera rotation (3, 3)
+Truth = dict[Path, np.ndarray | None]  # photo -> OpenGL camera-to-world (4, 4), None if unknown
+CORRECT_DEG = 10.0  # a placed photo within this rotation error ...
+CORRECT_SHARE = 0.2  # ... and this share of the capture radius of its reference pose is correct
 
 
 def spread(centres: np.ndarray, count: int) -> list[int]:
@@ -47,38 +50,37 @@ def spread(centres: np.ndarray, count: int) -> list[int]:
     return sorted(chosen)
 
 
-def _pick(paths: list[Path], rotations: list[np.ndarray], centres: list[np.ndarray],
-          count: int) -> Truth:
-    picks = spread(np.stack(centres), count)
-    return {paths[i]: rotations[i] for i in picks}
+def _pick(paths: list[Path], c2ws: list[np.ndarray], count: int) -> Truth:
+    picks = spread(np.stack([c[:3, 3] for c in c2ws]), count)
+    return {paths[i]: c2ws[i] for i in picks}
 
 
 def dtu_skull(count: int) -> Truth:
     import cv2
 
     cams = np.load(DATA / "dtu_skull" / "cameras_sphere.npz")
-    paths, rots, centres = [], [], []
+    paths, c2ws = [], []
     for i in range(49):
         _, rot, centre = cv2.decomposeProjectionMatrix(cams[f"world_mat_{i}"][:3])[:3]
         paths.append(DATA / "dtu_skull" / "images" / f"{i:03d}.jpg")
-        rots.append(rot)
-        centres.append(centre[:3, 0] / centre[3, 0])
-    return _pick(paths, rots, centres, count)
+        c2ws.append(opencv_w2c_to_gl_c2w(rot, -rot @ (centre[:3, 0] / centre[3, 0]), "dtu"))
+    return _pick(paths, c2ws, count)
 
 
 def temple(count: int) -> Truth:
     rows = (DATA / "temple_sparse" / "templeSR_par.txt").read_text().split("\n")[1:]
     rows = [r.split() for r in rows if r.strip()]
     step = len(rows) // count  # a ring taken at equal angles: every `step`-th photo
-    return {DATA / "temple_sparse" / r[0]: np.array(r[10:19], float).reshape(3, 3)
-            for r in rows[::step][:count]}
+    return {DATA / "temple_sparse" / r[0]: opencv_w2c_to_gl_c2w(
+        np.array(r[10:19], float).reshape(3, 3), np.array(r[19:22], float), r[0])
+        for r in rows[::step][:count]}
 
 
 def fruit(count: int) -> Truth:
     meta = json.loads((DATA / "fruit" / "transforms.json").read_text())
     c2w = [np.array(f["transform_matrix"]) for f in meta["frames"]]
     paths = [DATA / "fruit" / f["file_path"] for f in meta["frames"]]
-    return _pick(paths, [m[:3, :3].T for m in c2w], [m[:3, 3] for m in c2w], count)
+    return _pick(paths, c2w, count)
 
 
 def beer_can(count: int) -> Truth:
@@ -88,8 +90,7 @@ def beer_can(count: int) -> Truth:
               for f in read_source(DATA / "beer_can" / "sparse" / "0").frames}
     keep = sorted(n for n in frames if int(n) not in doubtful)
     paths = [DATA / "beer_can" / "images" / f"{n}.jpg" for n in keep]
-    return _pick(paths, [frames[n][:3, :3].T for n in keep], [frames[n][:3, 3] for n in keep],
-                 count)
+    return _pick(paths, [frames[n] for n in keep], count)
 
 
 def kermit(count: int) -> Truth:
@@ -103,11 +104,61 @@ SETS = {"dtu_skull": dtu_skull, "temple": temple, "fruit": fruit, "beer_can": be
 
 
 def relative_errors(recovered: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> np.ndarray:
-    """Degrees between recovered and true relative rotations R_i R_j^T of every pair of names
-    in both (world-to-camera rotations (3, 3))."""
+    """Degrees between recovered and true relative rotations of every pair of names in both
+    (camera-to-world matrices (4, 4), the same camera axes in both)."""
     names = sorted(set(recovered) & set(truth))
-    return np.array([rotation_angle((recovered[a] @ recovered[b].T).T @ (truth[a] @ truth[b].T))
+    return np.array([rotation_angle((recovered[a][:3, :3].T @ recovered[b][:3, :3]).T
+                                    @ (truth[a][:3, :3].T @ truth[b][:3, :3]))
                      for a, b in combinations(names, 2)])
+
+
+def _errors(est: np.ndarray, ref: np.ndarray, fit: np.ndarray, radius: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation degrees (N,), centre error / radius (N,)) of c2ws `est` against `ref` (N, 4, 4)
+    after the similarity that aligns the centres of the cameras `fit` (indices)."""
+    scale, rot, t = umeyama(est[fit, :3, 3], ref[fit, :3, 3])
+    centres = scale * est[:, :3, 3] @ rot.T + t
+    degrees = np.array([rotation_angle(r.T @ rot @ e) for r, e in zip(ref[:, :3, :3],
+                                                                   est[:, :3, :3])])
+    return degrees, np.linalg.norm(centres - ref[:, :3, 3], axis=-1) / radius
+
+
+def correct(recovered: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> set[str]:
+    """The recovered photos (c2w (4, 4)) whose poses agree with the truth under the one
+    similarity that the most of them agree with (see the module docstring)."""
+    names = sorted(set(recovered) & set(truth))
+    if len(names) == 2:  # no similarity to fit: the relative rotation alone
+        return set(names) if relative_errors(recovered, truth)[0] <= CORRECT_DEG else set()
+    if len(names) < 3:
+        return set()
+    est = np.stack([recovered[n] for n in names])
+    ref = np.stack([truth[n] for n in names])
+    every = np.stack(list(truth.values()))
+    radius = float(np.median(np.linalg.norm(every[:, :3, 3] - nearest_point_to_axes(every),
+                                            axis=-1)))
+    best = np.zeros(len(names), bool)
+    for triple in combinations(range(len(names)), 3):
+        degrees, share = _errors(est, ref, np.array(triple), radius)
+        agree = (degrees <= CORRECT_DEG) & (share <= CORRECT_SHARE)
+        if agree.sum() >= 3 and agree.sum() > best.sum():
+            degrees, share = _errors(est, ref, np.flatnonzero(agree), radius)  # refit
+            refit = (degrees <= CORRECT_DEG) & (share <= CORRECT_SHARE)
+            best = refit if refit.sum() >= agree.sum() else agree
+    return {n for n, ok in zip(names, best) if ok}
+
+
+def score(row: dict, recovered: dict[str, np.ndarray], guessed: list[str],
+          truth: dict[str, np.ndarray]) -> None:
+    """Add to `row` how many measured and ring-guessed photos are correct, and the measured
+    photos' relative rotation errors."""
+    right = correct(recovered, truth)
+    measured = {n: c for n, c in recovered.items() if n not in guessed}
+    row.update(correct=len(right - set(guessed)), guessed_correct=len(right & set(guessed)),
+               wrong=sorted(set(recovered) - right))
+    errors = relative_errors(measured, truth)
+    if len(errors):
+        row.update(rotation_deg_median=round(float(np.median(errors)), 2),
+                   rotation_deg_max=round(float(errors.max()), 2))
 
 
 def place(truth: Truth, max_side: int, work: Path) -> dict:
@@ -119,16 +170,13 @@ def place(truth: Truth, max_side: int, work: Path) -> dict:
     start = time.perf_counter()
     sfm = reconstruct(work / "images", [f"{p.name}.jpg" for p in photos], work, SfmSettings(),
                       Stages(show=False))
-    row = {"placed": len(sfm.placed), "total": len(truth), "unplaced": sfm.unplaced,
-           "seconds": round(time.perf_counter() - start, 1),
+    guessed = [n.rsplit(".", 1)[0] for n in getattr(sfm, "guessed", [])]  # older code: none
+    row = {"placed": len(sfm.placed), "guessed": len(guessed), "total": len(truth),
+           "unplaced": sfm.unplaced, "seconds": round(time.perf_counter() - start, 1),
            "attempts": [(a.label, a.placed) for a in sfm.attempts]}
     if sfm.reconstruction is not None and all(r is not None for r in truth.values()):
-        recovered = {im.name.rsplit(".", 1)[0]: im.cam_from_world().rotation.matrix()
-                     for im in sfm.reconstruction.images.values() if im.has_pose}
-        errors = relative_errors(recovered, {p.stem: r for p, r in truth.items()})
-        if len(errors):
-            row.update(rotation_deg_median=round(float(np.median(errors)), 2),
-                       rotation_deg_max=round(float(errors.max()), 2))
+        recovered = {p.name: p.camera.c2w for p in posed_photos(sfm.reconstruction)}
+        score(row, recovered, guessed, {p.stem: r for p, r in truth.items()})
     return row
 
 

@@ -153,7 +153,7 @@ def score(row: dict, recovered: dict[str, np.ndarray], guessed: list[str],
     photos' relative rotation errors."""
     right = correct(recovered, truth)
     measured = {n: c for n, c in recovered.items() if n not in guessed}
-    row.update(correct=len(right - set(guessed)), guessed_correct=len(right & set(guessed)),
+    row.update(correct=len(right - set(guessed)), ring_correct=len(right & set(guessed)),
                wrong=sorted(set(recovered) - right))
     errors = relative_errors(measured, truth)
     if len(errors):
@@ -170,8 +170,11 @@ def place(truth: Truth, max_side: int, work: Path) -> dict:
     start = time.perf_counter()
     sfm = reconstruct(work / "images", [f"{p.name}.jpg" for p in photos], work, SfmSettings(),
                       Stages(show=False))
-    guessed = [n.rsplit(".", 1)[0] for n in getattr(sfm, "guessed", [])]  # older code: none
-    row = {"placed": len(sfm.placed), "guessed": len(guessed), "total": len(truth),
+    ring = {n.rsplit(".", 1)[0]: how for n, how in getattr(sfm, "ring_method", {}).items()}
+    guessed = sorted(ring)  # placed with the ring's help (none before it)
+    row = {"placed": len(sfm.placed), "total": len(truth),
+           "ring_paired": sorted(n for n, how in ring.items() if how == "paired"),
+           "ring_guessed": sorted(n for n, how in ring.items() if how == "guessed"),
            "unplaced": sfm.unplaced, "seconds": round(time.perf_counter() - start, 1),
            "attempts": [(a.label, a.placed) for a in sfm.attempts]}
     if sfm.reconstruction is not None and all(r is not None for r in truth.values()):

@@ -5,8 +5,16 @@ the recovered relative rotations are from the published ones, for each shared ca
 
 The photos are spread around the object by the published cameras' azimuth (farthest-point
 sampling on the circle), so the set is the widest baseline the capture allows; kermit has no
-poses and takes evenly spaced file names. Rotation errors compare every pair of placed photos'
-relative rotation with the truth's (independent of the world frame and camera axes).
+poses and takes evenly spaced file names.
+
+Scoring (all poses as OpenGL camera-to-world): the placed cameras are aligned to the reference
+ones by the similarity that the most of them agree with (each triple of cameras proposes one,
+Umeyama 1991, refitted on the ones that agree); a photo is correct when, so aligned, its rotation
+is within CORRECT_DEG and its centre within CORRECT_SHARE of the capture radius of the reference.
+Photos placed with the turntable prior's help (windowshop.photos.fill: "paired", "guessed") are
+scored the same way but counted apart ("ring_correct"), never in "placed" or "correct". Rotation
+errors compare every pair of measured photos' relative rotation with the truth (independent of
+the world frame).
 """
 
 from __future__ import annotations

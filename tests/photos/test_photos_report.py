@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from windowshop.photos.report import reshoot, summary_lines
+from windowshop.photos.report import RING_NOTES, reshoot, summary_lines
 
 
 def test_reshoot_names_the_placed_neighbours_in_order():
@@ -20,3 +20,13 @@ def test_summary_lists_the_advice():
               "unplaced": ["c.jpg"], "reshoot": {"c.jpg": "retake it"}, "masks": "none"}
     lines = summary_lines(report)
     assert "could not place: c.jpg" in lines[1] and lines[2].strip() == "c.jpg: retake it"
+
+
+def test_summary_names_the_photos_the_ring_placed():
+    report = {"placed": 6, "used": 8, "reprojection_error_px": 0.5, "dropped": {},
+              "unplaced": [], "estimated_from_ring": {"c.jpg": RING_NOTES["paired"],
+                                                      "f.jpg": RING_NOTES["guessed"]},
+              "reshoot": {"c.jpg": "retake it", "f.jpg": "retake it too"}, "masks": "none"}
+    lines = summary_lines(report)
+    assert "not measured: c.jpg, f.jpg" in lines[1]
+    assert [line.strip() for line in lines[2:]] == ["c.jpg: retake it", "f.jpg: retake it too"]

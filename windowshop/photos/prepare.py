@@ -130,8 +130,9 @@ def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
         raise UserError(texture)
     if len(sfm.placed) >= max(3, math.ceil(MIN_PLACED_SHARE * count)):
         return
-    names = ", ".join(shown[n] for n in sfm.unplaced[:20])
-    names += " ..." if len(sfm.unplaced) > 20 else ""
+    missing = sorted(sfm.unplaced + sfm.guessed)  # posed by the ring alone is not enough
+    names = ", ".join(shown[n] for n in missing[:20])
+    names += " ..." if len(missing) > 20 else ""
     raise UserError(f"could only place {len(sfm.placed)} of {count} photos; not placed: {names}. "
                     f"Take more photos with overlap: walk around the object in small steps "
                     f"(10-15 degrees) so that each photo shares most of its view with the next"
@@ -255,11 +256,16 @@ def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, sourc
 def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
             found: Located, stages: Stages) -> dict:
     by_name = {p.name: p for p in photos}
-    unplaced = [_shown(by_name[n.rsplit(".", 1)[0]]) for n in sfm.unplaced]
+    def shown(name: str) -> str:
+        return _shown(by_name[name.rsplit(".", 1)[0]])
+
+    unplaced = [shown(n) for n in sfm.unplaced]
+    ring = {shown(n): report.RING_NOTES[how] for n, how in sfm.ring_method.items()}
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
-        "unplaced": unplaced, "reshoot": report.reshoot([_shown(p) for p in photos], unplaced),
+        "unplaced": unplaced, "estimated_from_ring": ring,
+        "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring)),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),

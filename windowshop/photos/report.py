@@ -11,6 +11,14 @@ import numpy as np
 from windowshop.scene.plot import box_lines, frustum_lines
 from windowshop.scene.types import Camera
 
+# report.json's words for the photos the turntable prior placed (windowshop.photos.fill)
+RING_NOTES = {
+    "paired": "estimated from the ring, not measured: its rotation and direction from a "
+              "neighbouring photo, its distance from the ring of the placed photos",
+    "guessed": "estimated from the ring, not measured: put between its neighbours in file "
+               "order on the ring of the placed photos, looking at the centre",
+}
+
 
 def write_report(out_dir: Path, report: dict) -> Path:
     """`report.json` in `out_dir`."""
@@ -24,8 +32,12 @@ def summary_lines(report: dict) -> list[str]:
     lines = [(f"placed {report['placed']} of {report['used']} photos "
               f"(mean reprojection error {report['reprojection_error_px']:.2f} px)")]
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
+    ring = report.get("estimated_from_ring", {})
+    if ring:
+        lines.append(f"  estimated from the ring of the others, not measured: {', '.join(ring)}")
     if report["unplaced"]:
         lines.append(f"  could not place: {', '.join(report['unplaced'])}")
+    if report["unplaced"] or ring:
         lines += [f"    {name}: {advice}" for name, advice in report.get("reshoot", {}).items()]
     if report["masks"] != "none":
         how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "

@@ -251,7 +251,7 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
             break
     placed = [] if best is None else sorted(im.name for im in best.images.values() if im.has_pose)
     filled = fill.Filled()
-    if settings.ring and best is not None and len(names) <= WIDE_MAX_PHOTOS:
+    if settings.ring and best is not None and len(placed) < len(names) <= WIDE_MAX_PHOTOS:
         start = time.perf_counter()
         filled = fill.fill(best, best_database, names, settings.seed)
         attempts.append(Attempt("ring", len(placed) + len(filled.measured),

@@ -260,7 +260,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         return _shown(by_name[name.rsplit(".", 1)[0]])
 
     unplaced = [shown(n) for n in sfm.unplaced]
-    ring = {shown(n): report.RING_NOTES[how] for n, how in sfm.ring_method.items()}
+    ring = {shown(n): report.RING_NOTES[how] for n, how in sorted(sfm.ring_method.items())}
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),

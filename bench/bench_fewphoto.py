@@ -21,15 +21,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import tempfile
 import time
 from itertools import combinations
 from pathlib import Path
 
 import numpy as np
-from provenance import emit
+from provenance import emit, machine
 
 from windowshop.photos.align import rotation_angle, umeyama
 from windowshop.photos.ingest import Dropped, read_photos
@@ -198,8 +196,7 @@ def main() -> None:
     parser.add_argument("--sets", default=",".join(SETS))
     parser.add_argument("--out", default=None, help="also write the JSON here")
     args = parser.parse_args()
-    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "count": args.count,
-               "load": os.getloadavg()[0]}
+    results = {**machine(), "count": args.count}
     for name in args.sets.split(","):
         with tempfile.TemporaryDirectory() as tmp:
             results[name] = place(SETS[name](args.count), args.max_side, Path(tmp))

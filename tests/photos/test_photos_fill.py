@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pycolmap
-import pytest
 
 from windowshop.photos import fill
 from windowshop.photos.output import posed_photos

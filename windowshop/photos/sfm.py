@@ -63,7 +63,8 @@ class SfmSettings:
     seed: int = 0
     verbose: bool = False
     # the known-turntable prior for a few photos (windowshop.photos.fill): photos left over are
-    # registered by PnP or guessed on the ring of the placed ones
+    # registered by PnP, else placed from a neighbour and the ring of the placed ones, else
+    # guessed on that ring
     ring: bool = True
 
 

@@ -91,6 +91,14 @@ def test_leftover_photos_are_measured_paired_or_guessed(tmp_path):
         assert np.allclose(poses[name][:3, :3], truth[:3, :3], atol=1e-3), name
 
 
+def test_without_guessing_the_rest_stay_unplaced(tmp_path):
+    model, database, names = _scene(tmp_path)
+    filled = fill.fill(model, database, names, seed=0, guess=False)
+    assert filled.guessed == [] and filled.paired == [names[PAIRED]]
+    poses = {p.image_name for p in posed_photos(model)}
+    assert names[5] not in poses and names[6] not in poses
+
+
 def test_a_pose_off_the_ring_is_refused():
     on = RING.camera(0.3)
     assert fill.on_ring(RING, on)

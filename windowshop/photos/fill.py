@@ -7,7 +7,8 @@ known-turntable prior, windowshop.photos.ring). Each is placed, in this order of
    pair's relative rotation (measured), its centre where the pair's baseline meets the ring
    (the prior sets only the distance); several such neighbours must agree; a photo so placed can
    be the next one's neighbour;
-3. "guessed": on the ring between its placed neighbours in shooting order, looking at the centre.
+3. "guessed": on the ring between its placed neighbours in shooting order, looking at the centre
+   (only when asked: sfm.SfmSettings.ring_guess).
 The report names the photos placed by 2 and 3 as estimated from the ring, not measured.
 
 Only for sets of at most sfm.WIDE_MAX_PHOTOS with MIN_PLACED or more placed; the model is
@@ -208,10 +209,11 @@ def _camera(model: pycolmap.Reconstruction, db: pycolmap.Database, image_id: int
     return model.cameras[camera_id] if model.exists_camera(camera_id) else db.read_camera(camera_id)
 
 
-def fill(model: pycolmap.Reconstruction, database: Path, names: list[str], seed: int) -> Filled:
+def fill(model: pycolmap.Reconstruction, database: Path, names: list[str], seed: int,
+         guess: bool = True) -> Filled:
     """Place the images of `names` (shooting order) that `model` lacks: by PnP, else from a
-    placed neighbour and the ring, else on the ring by shooting order (see the module
-    docstring). Nothing happens with fewer than MIN_PLACED placed."""
+    placed neighbour and the ring, else (when `guess`) on the ring by shooting order (see the
+    module docstring). Nothing happens with fewer than MIN_PLACED placed."""
     placed = {p.image_name: p.camera.c2w for p in posed_photos(model)}
     filled = Filled()
     if len(placed) < MIN_PLACED or len(placed) == len(names):
@@ -237,7 +239,7 @@ def fill(model: pycolmap.Reconstruction, database: Path, names: list[str], seed:
                     _add(model, db, ids[name], poses[name])
                     grown = True
         rest = [n for n in missing if poses[n] is None]
-        if rest:
+        if rest and guess:
             known = {names.index(p.image_name): p.camera.c2w for p in posed_photos(model)}
             guesses = guess_poses(known, len(names))
             for name in rest:

@@ -66,6 +66,10 @@ class SfmSettings:
     # registered by PnP, else placed from a neighbour and the ring of the placed ones, else
     # guessed on that ring
     ring: bool = True
+    # ... and the photos even that leaves over put on the ring by shooting order: off by
+    # default, as bench_fewphoto scored fruit's 4 such guesses all wrong (uneven steps, a
+    # hand-held ring), and a wrong pose spoils the fit more than a missing photo does
+    ring_guess: bool = False
 
 
 @dataclass
@@ -254,7 +258,7 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
     filled = fill.Filled()
     if settings.ring and best is not None and len(placed) < len(names) <= WIDE_MAX_PHOTOS:
         start = time.perf_counter()
-        filled = fill.fill(best, best_database, names, settings.seed)
+        filled = fill.fill(best, best_database, names, settings.seed, settings.ring_guess)
         attempts.append(Attempt("ring", len(placed) + len(filled.measured),
                                 time.perf_counter() - start))
     placed = sorted(placed + filled.measured)

@@ -5,6 +5,7 @@
                       -> the surface's level from the field's silhouettes (level.choose_level)
                       -> the lattice carved by the photos' masks, where they have any (carve)
                       -> marching cubes, largest pieces, decimation (mesh.object_mesh)
+                      -> moved to where the photos agree (settle)
                       -> the model frame: +Y up, standing at the origin (frame.model_frame)
                       -> UVs and the base colour baked from the photos, the field's where no
                          photo sees the surface (texture, photos)
@@ -62,6 +63,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
     from windowshop.export.photos import training_photos
+    from windowshop.export.settle import settle
     from windowshop.fit.checkpoint import load_run
 
     check_options(options)
@@ -87,10 +89,13 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         lap("carve")
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     lap("mesh")
-    frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
-    depths = tuple(d * cell for d in BAKE_DEPTHS)
     photos = photos.spread(options.bake_views) if photos and options.bake_views > 0 else None
+    if photos is not None and options.settle:
+        mesh = settle(mesh, photos, cell)
+        lap("settle")
+    frame = model_frame(mesh.vertices, run.transform, options.size_cm)
+    depths = tuple(d * cell for d in BAKE_DEPTHS)
     uv = texture = None
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)

@@ -17,6 +17,7 @@ with too little weight are topped up with the field's colour (texture.field_colo
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,29 +125,24 @@ def _bilinear(image: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
 
 
 @torch.no_grad()
-def project_photos(points: np.ndarray, normals: np.ndarray, photos: Photos, tolerance: float,
-                   occluders: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(colour sum (N, 3), weight (N,)): the photos' weighted colours at surface `points` (N, 3)
-    with outward unit `normals` (N, 3) (see the module docstring); colour sum / weight is the blend.
-
-    What hides a point is `occluders` (M, 3), points sampling the whole surface densely (several
-    a pixel; default: `points` themselves, as the texels of a texture do): a point is visible in a
-    view when its depth is at most `tolerance` (world units), plus what the slope there allows,
-    behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
-    p = torch.as_tensor(points, dtype=torch.float32)
-    n = torch.as_tensor(normals, dtype=torch.float32)
-    o = None if occluders is None else torch.as_tensor(occluders, dtype=torch.float32)
-    total = torch.zeros(len(p), 3)
-    weight = torch.zeros(len(p))
+def visible_views(points: torch.Tensor, normals: torch.Tensor, photos: Photos, tolerance: float,
+                  occluders: torch.Tensor | None = None
+                  ) -> Iterator[tuple[Camera, np.ndarray, torch.Tensor, torch.Tensor]]:
+    """For each photo: (camera, image, index (K,), weight (K,)): the `points` (N, 3) with outward
+    unit `normals` (N, 3) it sees, and how much its pixel there counts (see the module
+    docstring). What hides a point is `occluders` (M, 3), points sampling the whole surface
+    densely (several a pixel; default: `points` themselves, as the texels of a texture do): a
+    point is visible in a view when its depth is at most `tolerance` (world units), plus what the
+    slope there allows, behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
     for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
-        xy_all, z_all = screen(p, camera)
-        depth = splat_depth(*(screen(o, camera) if o is not None else (xy_all, z_all)), camera)
+        xy_all, z_all = screen(points, camera)
+        depth = splat_depth(*(screen(occluders, camera) if occluders is not None
+                              else (xy_all, z_all)), camera)
         ramp = edge_ramp(depth.numpy(), 4 * tolerance, camera.fx)
         if alpha is not None:
             ramp = ramp * np.clip(2.0 * alpha - 1.0, 0.0, 1.0)  # half-covered pixels lend nothing
         centre = torch.as_tensor(camera.c2w[:3, 3], dtype=torch.float32)
-        to_camera = F.normalize(centre - p, dim=-1)
-        cos = (n * to_camera).sum(-1)
+        cos = (normals * F.normalize(centre - points, dim=-1)).sum(-1)
         index = (cos > MIN_COS).nonzero()[:, 0]
         xy, z = xy_all[index], z_all[index]
         px = torch.floor(xy).long()
@@ -159,8 +155,23 @@ def project_photos(points: np.ndarray, normals: np.ndarray, photos: Photos, tole
         slack = tolerance + 2 * z / camera.fx * torch.sqrt(1 - c * c) / c
         seen = z <= depth[px[:, 1], px[:, 0]] + slack
         index, xy = index[seen], xy[seen]
-        w = cos[index] ** COS_POWER * _bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
-        colour = _bilinear(torch.as_tensor(image, dtype=torch.float32), xy)
+        weight = cos[index] ** COS_POWER * _bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
+        yield camera, image, index, weight
+
+
+@torch.no_grad()
+def project_photos(points: np.ndarray, normals: np.ndarray, photos: Photos, tolerance: float,
+                   occluders: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(colour sum (N, 3), weight (N,)): the photos' weighted colours at surface `points` (N, 3)
+    with outward unit `normals` (N, 3), seen as visible_views says; colour sum / weight is the
+    blend."""
+    p = torch.as_tensor(points, dtype=torch.float32)
+    o = None if occluders is None else torch.as_tensor(occluders, dtype=torch.float32)
+    total = torch.zeros(len(p), 3)
+    weight = torch.zeros(len(p))
+    for camera, image, index, w in visible_views(p, torch.as_tensor(normals, dtype=torch.float32),
+                                                 photos, tolerance, o):
+        colour = _bilinear(torch.as_tensor(image, dtype=torch.float32), screen(p[index], camera)[0])
         total.index_add_(0, index, w[:, None] * colour)
         weight.index_add_(0, index, w)
     return total.numpy(), weight.numpy()

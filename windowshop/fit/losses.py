@@ -73,6 +73,11 @@ def tv_density(inp: LossInput) -> torch.Tensor:
     return inp.out.aux["tv_density"]
 
 
+def occlusion(inp: LossInput) -> torch.Tensor:
+    """FreeNeRF's occlusion penalty: density near where the rays enter the box, aux["occlusion"]."""
+    return inp.out.aux["occlusion"]
+
+
 def patch_smoothness(values: torch.Tensor, weights: torch.Tensor, size: int) -> torch.Tensor:
     """The mean over every pair of neighbouring pixels (across and down) of square patches of their
     `weights`' product times the squared difference of their `values`: both (P * size * size,),
@@ -85,11 +90,11 @@ def patch_smoothness(values: torch.Tensor, weights: torch.Tensor, size: int) -> 
 
 def depth_smoothness(inp: LossInput) -> torch.Tensor:
     """RegNeRF's depth smoothness on virtual patches: the surface depth (expected depth over the
-    opacity) of neighbouring rays should agree where both hit the object (pairs weighed by their
-    opacities, which get no gradient: the object's outline is left to the photos)."""
+    opacity, so that fading a ray moves no surface) of neighbouring rays should agree where both
+    hit the object (pairs weighed by their opacities, which get no gradient from the weighing:
+    the object's outline is left to the photos)."""
     out, size = inp.patches()
-    opacity = out.opacity.detach()
-    return patch_smoothness(out.depth / opacity.clamp(min=1e-3), opacity, size)
+    return patch_smoothness(out.depth / out.opacity.clamp(min=1e-3), out.opacity.detach(), size)
 
 
 def virtual_entropy(inp: LossInput) -> torch.Tensor:
@@ -103,6 +108,7 @@ def virtual_entropy(inp: LossInput) -> torch.Tensor:
 REGULARISERS: dict[str, Callable[[LossInput], torch.Tensor]] = {
     "distortion": distortion,
     "tv_density": tv_density,
+    "occlusion": occlusion,
     "depth_smoothness": depth_smoothness,
     "virtual_entropy": virtual_entropy,
 }

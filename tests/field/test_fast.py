@@ -176,7 +176,7 @@ def test_the_occlusion_penalty_is_the_optical_thickness_next_to_the_box_entry():
     aux = model.render_rays(origins, directions, torch.ones(2, 3)).aux
     sigma = float(model.density(torch.zeros(1, 3)).detach())
     # the samples (one every step, jittered) within 0.5 of the entry: 0.5 of fog, give or take a step
-    assert abs(float(aux["occlusion"]) - sigma * 0.5) <= sigma * model.step_length + 1e-6
+    assert abs(float(aux["occlusion"].detach()) - sigma * 0.5) <= sigma * model.step_length + 1e-6
 
 
 def test_density_dropout_only_trains_on_a_random_share_of_the_samples():

@@ -40,7 +40,9 @@ from provenance import machine
 from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
-from windowshop.fit.trainer import Progress, TrainingRun, carve_to_scene, train_step, training_pixels
+from windowshop.fit.losses import loss_terms
+from windowshop.fit.trainer import (Progress, TrainingRun, carve_to_scene, train_step, training_pixels,
+                                    virtual_sampler)
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -87,8 +89,10 @@ def start_run(scene, name: str, config, seconds: float, device: torch.device):
     optimizer = model.make_optimizer()
     for group in optimizer.param_groups:
         group["initial_lr"] = group["lr"]
+    losses = loss_terms(config)
+    virtual = virtual_sampler(losses, [v.camera for v in scene.split("train")], model.bounds, device, 0)
     run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]),
-                      {}, Path(tempfile.gettempdir()), Progress())
+                      {}, Path(tempfile.gettempdir()), Progress(), losses=losses, virtual=virtual)
     model.train()
     return run, *training_pixels(scene, config, device)
 

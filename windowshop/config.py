@@ -107,6 +107,16 @@ class FastConfig:
     # views composited over a known colour with their alpha mattes (Blender's RGBA) trained over
     # random colours and carved like masked scenes: None: with few photos
     masked: bool | None = None
+    # RegNeRF's priors on patches of rays from random cameras with no photo (fit/virtual.py):
+    depth_smoothness: float = 0.0  # neighbouring rays' surface depths agree
+    virtual_entropy: float = 0.0  # each ray's opacity is 0 or 1
+    virtual_patches: int = 16  # patches per step ...
+    patch_size: int = 8  # ... of this many pixels square
+    # FreeNeRF's occlusion penalty: density within `occlusion_reach` (scene units) of where each
+    # training ray enters the box
+    occlusion: float = 0.0
+    occlusion_reach: float = 0.1
+    density_dropout: float = 0.0  # share of samples whose density training drops at random
 
 
 FAST_PRESETS = {

@@ -158,3 +158,33 @@ def test_the_pure_pytorch_path_learns_too(scene, monkeypatch):
             rgb = model.render_rays(origins, directions, torch.ones(len(origins), 3)).rgb
         errors.append(float(torch.mean((rgb - truth) ** 2)))
     assert errors[1] < 0.5 * errors[0], errors
+
+
+def uniform_fog(**overrides) -> FastModel:
+    """A fast model over the unit box filled with one density, in training mode."""
+    bounds = Bounds(aabb=((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)), near=0.5, far=6.0)
+    model = FastModel(FastConfig(voxels=16**3, growth=(), **overrides), bounds)
+    with torch.no_grad():
+        model.density_grid.values.fill_(model._raw_at_alpha(0.05))
+    return model.train()
+
+
+def test_the_occlusion_penalty_is_the_optical_thickness_next_to_the_box_entry():
+    model = uniform_fog(occlusion=1.0, occlusion_reach=0.5)
+    origins = torch.tensor([[-3.0, 0.1, 0.2], [0.2, -3.0, -0.3]])
+    directions = torch.tensor([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    aux = model.render_rays(origins, directions, torch.ones(2, 3)).aux
+    sigma = float(model.density(torch.zeros(1, 3)).detach())
+    # the samples (one every step, jittered) within 0.5 of the entry: 0.5 of fog, give or take a step
+    assert abs(float(aux["occlusion"].detach()) - sigma * 0.5) <= sigma * model.step_length + 1e-6
+
+
+def test_density_dropout_only_trains_on_a_random_share_of_the_samples():
+    model = uniform_fog(density_dropout=0.5)
+    origins = torch.tensor([[-3.0, 0.0, 0.0]]).expand(64, 3)
+    directions = torch.tensor([[1.0, 0.0, 0.0]]).expand(64, 3)
+    first = model.render_rays(origins, directions, torch.ones(64, 3)).opacity
+    assert float(first.std()) > 0  # the same ray, thinned differently each time
+    model.eval()
+    kept = model.render_rays(origins, directions, torch.ones(64, 3)).opacity
+    torch.testing.assert_close(kept, kept[:1].expand(64))

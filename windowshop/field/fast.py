@@ -201,8 +201,9 @@ class FastModel(RadianceModel):
         """Every occupied sample (jittered when training) and its compositing weight.
 
         Returns t (S,), weights (S,), ray (S,), opacity (R,), depth (R,) and S; when training
-        with regularisers, puts each ray's distortion (R,) and the density's total variation
-        (a scalar) into `aux`.
+        with regularisers, puts each ray's distortion (R,), the density's total variation and
+        the occlusion penalty (scalars) into `aux`. With `density_dropout`, training drops
+        samples' density at random (DropGaussian's idea carried to a grid).
         """
         step = self.step_length
         samples = self.occupancy.march(origins, directions, self.bounds.near, self.bounds.far,
@@ -212,12 +213,24 @@ class FastModel(RadianceModel):
             raw, aux["tv_density"] = self._density_with_tv(origins, directions, t, ray)
         else:
             raw = self.density_grid.along_rays(origins, directions, t, ray)[:, 0]
-        weights = packed_weights(self._activate(raw), step, ray, samples.counts)
+        sigma = self._activate(raw)
+        if self.training and self.config.occlusion > 0:
+            aux["occlusion"] = self._occlusion(origins, directions, t, ray, sigma * step)
+        if self.training and self.config.density_dropout > 0:
+            sigma = F.dropout(sigma, self.config.density_dropout)  # the rest scaled up by 1/(1-p)
+        weights = packed_weights(sigma, step, ray, samples.counts)
         if self.training and self.config.distortion > 0:
             aux["distortion"] = packed_distortion(weights, t, step, ray, samples.counts)
         n_rays = origins.shape[0]
         return (t, weights, ray, ray_sum(weights, ray, n_rays), ray_sum(weights * t, ray, n_rays),
                 len(samples))
+
+    def _occlusion(self, origins, directions, t, ray, thickness) -> torch.Tensor:
+        """FreeNeRF's occlusion penalty for a box: the rays' mean optical thickness (`thickness`
+        (S,): density times step) within `occlusion_reach` (world units) of where they enter it."""
+        entry = ray_box(origins, directions, self.occupancy.aabb, self.bounds.near, self.bounds.far)[0]
+        near = (t - entry.index_select(0, ray)) < self.config.occlusion_reach
+        return torch.sum(thickness * near) / origins.shape[0]
 
     def _density_with_tv(self, origins, directions, t, ray) -> tuple[torch.Tensor, torch.Tensor]:
         """Raw density (S,) at the samples and its total variation: the mean squared change one

@@ -106,5 +106,21 @@ class CameraRays:
         """`n` rays: origins (n, 3) and unit directions (n, 3), cameras drawn uniformly."""
         view = torch.randint(len(self.c2w), (n,), generator=self.generator, device=self.device)
         uv = torch.rand(n, 2, generator=self.generator, device=self.device) * self.sizes[view]
+        return self._rays(view, uv)
+
+    def patches(self, n: int, size: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """The rays through `n` square patches of `size` x `size` neighbouring pixel centres, each
+        at a uniformly random place in a uniformly random camera's image: origins and unit
+        directions (n * size * size, 3), patch after patch, row-major within a patch."""
+        view = torch.randint(len(self.c2w), (n,), generator=self.generator, device=self.device)
+        room = (self.sizes[view] - size).clamp(min=0)  # (n, 2) where a patch's corner may go
+        corner = torch.floor(torch.rand(n, 2, generator=self.generator, device=self.device) * (room + 1))
+        step = torch.arange(size, device=self.device, dtype=torch.float32) + 0.5
+        v, u = torch.meshgrid(step, step, indexing="ij")
+        uv = corner[:, None, :] + torch.stack([u, v], dim=-1).view(1, -1, 2)  # (n, size^2, 2)
+        return self._rays(view.repeat_interleave(size * size), uv.view(-1, 2))
+
+    def _rays(self, view: torch.Tensor, uv: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rays through the image points `uv` (n, 2) of the cameras `view` (n,)."""
         fx, fy, cx, cy = self.intrinsics[view].unbind(-1)
         return rays_from_directions(self.c2w[view], pixel_directions(fx, fy, cx, cy, uv[:, 0], uv[:, 1]))

@@ -34,6 +34,7 @@ from windowshop.fit.checkpoint import LOG, load_checkpoint, save_checkpoint, sce
 from windowshop.fit.evaluate import EVAL_DIR, evaluate_views, held_out_views, write_metrics
 from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
 from windowshop.fit.schedule import Hook, StepInfo, schedule_for
+from windowshop.fit.virtual import virtual_rays
 from windowshop.memory import spans
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, RadianceModel, model_class
@@ -99,7 +100,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     (also written to `out_dir/metrics.json`). `callbacks` hear of every step and checkpoint; when
     its `should_stop()` is true the run is checkpointed and `FitCancelled` raised (no evaluation).
     `extra_losses` are added to the model's; those marked `virtual` are fed rays from
-    `virtual_cameras` (default: a turntable orbit of the training cameras), which need no photo.
+    `virtual_cameras` (default: random cameras around the training ones), which need no photo.
     """
     if not fit_config.iters and not fit_config.seconds:
         raise UserError("give a training budget: --iters N or --seconds S")
@@ -122,10 +123,8 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     torch.manual_seed(fit_config.seed + progress.step)  # a resumed run draws fresh batches
     record = scene_record(scene)
     losses = loss_terms(model_config, extra_losses)
-    virtual = None
-    if any(term.virtual for term in losses):  # only then: the orbit is fitted to the cameras
-        virtual = CameraRays(list(virtual_cameras or _orbit([v.camera for v in train_views])),
-                             device, seed=fit_config.seed + progress.step)
+    virtual = virtual_sampler(losses, [v.camera for v in train_views], model.bounds, device,
+                              fit_config.seed + progress.step, virtual_cameras)
     run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress, callbacks,
                       losses=losses, virtual=virtual)
     write_config(out_dir, model_name, model_config, fit_config, run.record)
@@ -195,11 +194,15 @@ def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
         model.carve(torch.from_numpy(mask))
 
 
-def _orbit(cameras: list[Camera], frames: int = 120) -> list[Camera]:
-    """`frames` cameras on the turntable orbit of the training `cameras`, at their image size."""
-    from windowshop.video.paths import fit_orbit, orbit_cameras
-
-    return orbit_cameras(fit_orbit(cameras), frames, cameras[0].width, cameras[0].height)
+def virtual_sampler(losses: Sequence[LossTerm], cameras: list[Camera], bounds: Bounds, device,
+                    seed: int, virtual_cameras: Sequence[Camera] | None = None) -> CameraRays | None:
+    """Rays from `virtual_cameras` (default: random ones around the training `cameras`, looking at
+    the centre of `bounds`) when a loss term is `virtual`, else None."""
+    if not any(term.virtual for term in losses):
+        return None
+    if virtual_cameras:
+        return CameraRays(list(virtual_cameras), device, seed=seed)
+    return virtual_rays(cameras, np.mean(np.asarray(bounds.aabb, dtype=np.float64), axis=0), device, seed)
 
 
 def _backgrounds(kind: str, rays: int, device: torch.device) -> torch.Tensor:

@@ -115,7 +115,7 @@ def edge_ramp(depth: np.ndarray, jump: float, focal: float) -> np.ndarray:
     return np.clip((inside - 1.5) / EDGE_PIXELS, 0.0, 1.0).astype(np.float32)
 
 
-def _bilinear(image: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+def bilinear(image: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
     """(N, C) of `image` (H, W, C) at pixel coordinates `xy` (N, 2) (centres at +0.5)."""
     h, w = image.shape[:2]
     grid = torch.stack([2 * xy[:, 0] / w - 1, 2 * xy[:, 1] / h - 1], -1)
@@ -127,12 +127,12 @@ def _bilinear(image: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
 @torch.no_grad()
 def visible_views(points: torch.Tensor, normals: torch.Tensor, photos: Photos, tolerance: float,
                   occluders: torch.Tensor | None = None
-                  ) -> Iterator[tuple[Camera, np.ndarray, torch.Tensor, torch.Tensor]]:
-    """For each photo: (camera, image, index (K,), weight (K,)): the `points` (N, 3) with outward
-    unit `normals` (N, 3) it sees, and how much its pixel there counts (see the module
-    docstring). What hides a point is `occluders` (M, 3), points sampling the whole surface
-    densely (several a pixel; default: `points` themselves, as the texels of a texture do): a
-    point is visible in a view when its depth is at most `tolerance` (world units), plus what the
+                  ) -> Iterator[tuple[Camera, np.ndarray, torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """For each photo: (camera, image, index (K,), xy (K, 2), weight (K,)): the `points` (N, 3)
+    with outward unit `normals` (N, 3) it sees, their pixel coordinates (export.raster.screen's),
+    and how much its pixel there counts (see the module docstring). What hides a point is
+    `occluders` (M, 3), points sampling the whole surface densely (several a pixel; default:
+    `points` themselves, as the texels of a texture do): a point is visible in a view when its depth is at most `tolerance` (world units), plus what the
     slope there allows, behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
     for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
         xy_all, z_all = screen(points, camera)
@@ -155,8 +155,8 @@ def visible_views(points: torch.Tensor, normals: torch.Tensor, photos: Photos, t
         slack = tolerance + 2 * z / camera.fx * torch.sqrt(1 - c * c) / c
         seen = z <= depth[px[:, 1], px[:, 0]] + slack
         index, xy = index[seen], xy[seen]
-        weight = cos[index] ** COS_POWER * _bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
-        yield camera, image, index, weight
+        weight = cos[index] ** COS_POWER * bilinear(torch.as_tensor(ramp)[..., None], xy)[:, 0]
+        yield camera, image, index, xy, weight
 
 
 @torch.no_grad()
@@ -169,9 +169,9 @@ def project_photos(points: np.ndarray, normals: np.ndarray, photos: Photos, tole
     o = None if occluders is None else torch.as_tensor(occluders, dtype=torch.float32)
     total = torch.zeros(len(p), 3)
     weight = torch.zeros(len(p))
-    for camera, image, index, w in visible_views(p, torch.as_tensor(normals, dtype=torch.float32),
-                                                 photos, tolerance, o):
-        colour = _bilinear(torch.as_tensor(image, dtype=torch.float32), screen(p[index], camera)[0])
+    for _, image, index, xy, w in visible_views(p, torch.as_tensor(normals, dtype=torch.float32),
+                                                photos, tolerance, o):
+        colour = bilinear(torch.as_tensor(image, dtype=torch.float32), xy)
         total.index_add_(0, index, w[:, None] * colour)
         weight.index_add_(0, index, w)
     return total.numpy(), weight.numpy()

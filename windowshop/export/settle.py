@@ -18,7 +18,7 @@ import torch
 from scipy import sparse
 
 from windowshop.export.mesh import Mesh, vertex_normals
-from windowshop.export.photos import Photos, _bilinear, visible_views
+from windowshop.export.photos import Photos, bilinear, visible_views
 from windowshop.export.raster import screen
 from windowshop.export.texture import surface_samples
 
@@ -48,11 +48,11 @@ def disagreement(mesh: Mesh, normals: np.ndarray, photos: Photos, cell: float
     weight = torch.zeros(len(p))
     first = torch.zeros(len(OFFSETS), len(p), 3)  # weighted sums of the colours ...
     second = torch.zeros(len(OFFSETS), len(p))  # ... and of their squares
-    for camera, image, index, w in visible_views(p, n, photos, cell, occluders):
+    for camera, image, index, _, w in visible_views(p, n, photos, cell, occluders):
         image = torch.as_tensor(image, dtype=torch.float32)
         weight.index_add_(0, index, w)
         for k, offset in enumerate(OFFSETS):
-            colour = _bilinear(image, screen(p[index] + float(offset * cell) * n[index], camera)[0])
+            colour = bilinear(image, screen(p[index] + float(offset * cell) * n[index], camera)[0])
             first[k].index_add_(0, index, w[:, None] * colour)
             second[k].index_add_(0, index, w * (colour * colour).sum(-1))
     safe = weight.clamp(min=1e-9)

@@ -132,8 +132,8 @@ def visible_views(points: torch.Tensor, normals: torch.Tensor, photos: Photos, t
     with outward unit `normals` (N, 3) it sees, their pixel coordinates (export.raster.screen's),
     and how much its pixel there counts (see the module docstring). What hides a point is
     `occluders` (M, 3), points sampling the whole surface densely (several a pixel; default:
-    `points` themselves, as the texels of a texture do): a point is visible in a view when its depth is at most `tolerance` (world units), plus what the
-    slope there allows, behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
+    `points` themselves, as the texels of a texture do): a point is visible in a view when its
+    depth is at most `tolerance` (world units), plus what the slope there allows, behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
     for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
         xy_all, z_all = screen(points, camera)
         depth = splat_depth(*(screen(occluders, camera) if occluders is not None

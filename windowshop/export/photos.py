@@ -127,13 +127,15 @@ def bilinear(image: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
 @torch.no_grad()
 def visible_views(points: torch.Tensor, normals: torch.Tensor, photos: Photos, tolerance: float,
                   occluders: torch.Tensor | None = None
-                  ) -> Iterator[tuple[Camera, np.ndarray, torch.Tensor, torch.Tensor, torch.Tensor]]:
+                  ) -> Iterator[tuple[Camera, np.ndarray, torch.Tensor, torch.Tensor,
+                                      torch.Tensor]]:
     """For each photo: (camera, image, index (K,), xy (K, 2), weight (K,)): the `points` (N, 3)
     with outward unit `normals` (N, 3) it sees, their pixel coordinates (export.raster.screen's),
     and how much its pixel there counts (see the module docstring). What hides a point is
     `occluders` (M, 3), points sampling the whole surface densely (several a pixel; default:
     `points` themselves, as the texels of a texture do): a point is visible in a view when its
-    depth is at most `tolerance` (world units), plus what the slope there allows, behind the nearest occluder in its pixel's neighbourhood (splat_depth)."""
+    depth is at most `tolerance` (world units), plus what the slope there allows, behind the
+    nearest occluder in its pixel's neighbourhood (splat_depth)."""
     for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
         xy_all, z_all = screen(points, camera)
         depth = splat_depth(*(screen(occluders, camera) if occluders is not None

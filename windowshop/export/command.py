@@ -9,6 +9,7 @@
                       -> the model frame: +Y up, standing at the origin (frame.model_frame)
                       -> UVs and the base colour baked from the photos, the field's where no
                          photo sees the surface (texture, photos)
+                      -> that texture refined by least squares against the photos (refine)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.
@@ -63,6 +64,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
     from windowshop.export.photos import training_photos
+    from windowshop.export.refine import refine_texture
     from windowshop.export.settle import settle
     from windowshop.fit.checkpoint import load_run
 
@@ -100,8 +102,13 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)
         lap("unwrap")
-        texture = tex.bake_texture(run.model, unwrapped, options.texture, depths, photos, cell)
+        image = tex.bake_image(run.model, unwrapped, options.texture, depths, photos, cell)
         lap("bake")
+        if photos is not None and options.refine:
+            image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
+                                   photos)
+            lap("refine")
+        texture = tex.finish_texture(image, options.texture)
         surface = unwrapped
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)

@@ -176,10 +176,18 @@ def field_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
 def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
                  depths: tuple[float, ...], photos: Photos | None = None,
                  tolerance: float = 0.0) -> np.ndarray:
-    """(size, size, 3) uint8: the base-colour texture of `unwrapped`: from the `photos` where they
-    see the surface (photos.py; `tolerance` its depth test's), else from the field (its colours
-    read at `depths` under the surface; see the module docstring). Photos coarser than the
-    texture are baked at a coarser size (bake_size) and the texture resampled from it."""
+    """(size, size, 3) uint8: the base-colour texture of `unwrapped` (bake_image, then
+    finish_texture)."""
+    return finish_texture(bake_image(model, unwrapped, size, depths, photos, tolerance), size)
+
+
+def bake_image(model: RadianceModel, unwrapped: Unwrapped, size: int,
+               depths: tuple[float, ...], photos: Photos | None = None,
+               tolerance: float = 0.0) -> np.ndarray:
+    """(B, B, 3) float32 in [0, 1]: the base-colour texture of `unwrapped` at its bake size B:
+    from the `photos` where they see the surface (photos.py; `tolerance` its depth test's), else
+    from the field (its colours read at `depths` under the surface; see the module docstring).
+    Photos coarser than a `size` texture are baked at a coarser size (bake_size)."""
     bake = size if photos is None else bake_size(unwrapped, size, photos)
     ids = rasterise(unwrapped.uv, unwrapped.faces, bake)
     index, points, normals = texel_surface(unwrapped, ids)
@@ -187,8 +195,12 @@ def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
     image[index] = surface_colour(model, points, normals, depths, photos, tolerance)
     empty = (ids < 0)
     nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
-    image = image.reshape(bake, bake, 3)[nearest[0], nearest[1]]
-    if bake < size:
+    return image.reshape(bake, bake, 3)[nearest[0], nearest[1]]
+
+
+def finish_texture(image: np.ndarray, size: int) -> np.ndarray:
+    """(size, size, 3) uint8: the baked `image` (B, B, 3) in [0, 1] resampled to `size`."""
+    if image.shape[0] < size:
         image = cv2.resize(image, (size, size), interpolation=cv2.INTER_LINEAR)
     return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 

@@ -1,0 +1,62 @@
+"""Refining the texture by least squares: a plane photographed from a few cameras, its texture
+baked wrong (blurred, or one flat colour), is drawn right again."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from export_helpers import square
+from windowshop.export.photos import Photos
+from windowshop.export.raster import render_mesh
+from windowshop.export.refine import SUPERSAMPLE, refine_texture
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+
+SIZE = 32  # texels a side
+UV = np.array([[2.0, 30.0], [30.0, 30.0], [30.0, 2.0], [2.0, 2.0]]) / SIZE  # the square's texels
+
+
+def true_texture() -> np.ndarray:
+    """(SIZE, SIZE, 3) float in [0, 1]: a pattern of about 8 texels' period."""
+    y, x = np.mgrid[:SIZE, :SIZE] + 0.5
+    value = 0.5 + 0.35 * np.sin(2 * np.pi * x / 8) * np.cos(2 * np.pi * y / 11)
+    return np.stack([value, 1 - value, 0.5 + 0 * value], -1)
+
+
+def photographed(texture: np.ndarray, eye: list[float], pixels: int = 48) -> tuple[Camera,
+                                                                                    np.ndarray]:
+    """A camera at `eye` looking at the square and what it sees there, anti-aliased."""
+    c2w = look_at(np.array(eye), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    camera = Camera(fx=2.0 * pixels, fy=2.0 * pixels, cx=pixels / 2, cy=pixels / 2,
+                    width=pixels, height=pixels, c2w=c2w)
+    k = SUPERSAMPLE
+    vertices, faces = square(0.0, 0.5)
+    image, _ = render_mesh(vertices, faces, camera.resized(pixels * k, pixels * k), uv=UV,
+                           texture=np.round(texture * 255).astype(np.uint8))
+    return camera, image.reshape(pixels, k, pixels, k, 3).mean((1, 3))
+
+
+def photos(texture: np.ndarray) -> Photos:
+    """The square from above and from 25 degrees off to three sides."""
+    shots = [photographed(texture, eye) for eye in
+             ([0.0, 0.0, 2.0], [0.85, 0.0, 1.8], [-0.85, 0.0, 1.8], [0.0, 0.85, 1.8])]
+    return Photos([c for c, _ in shots], [i for _, i in shots], [None] * len(shots))
+
+
+@pytest.mark.parametrize("wrong", ["blurred", "flat"])
+def test_a_wrong_texture_is_refined_to_the_photographed_one(wrong):
+    truth = true_texture()
+    start = (ndimage.uniform_filter(truth, (5, 5, 1)) if wrong == "blurred"
+             else np.full_like(truth, 0.5))
+    vertices, faces = square(0.0, 0.5)
+    refined = refine_texture(vertices, faces, UV, start.astype(np.float32), photos(truth))
+    inner = (slice(4, SIZE - 4), slice(4, SIZE - 4))  # away from the square's rim
+    before = np.abs(start - truth)[inner].mean()
+    after = np.abs(refined - truth)[inner].mean()
+    assert before > 0.05
+    assert after < 0.02
+    # and a view no photo was taken from sees it right too
+    camera, seen = photographed(truth, [0.6, -0.6, 1.7])
+    _, drawn = photographed(refined, [0.6, -0.6, 1.7])
+    assert np.abs(drawn - seen).mean() < 0.2 * np.abs(photographed(start, [0.6, -0.6, 1.7])[1]
+                                                      - seen).mean()

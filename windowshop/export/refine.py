@@ -1,0 +1,121 @@
+"""The baked texture refined by least squares against the training photos (as NeRF2Mesh's second
+stage refines its texture).
+
+Projecting photos onto the mesh (photos.py) averages each texel's colour over the views; where
+the mesh lies a little off the photographed surface, or a texel is smeared over a pixel, the
+average blurs. Instead, draw the mesh at the photos' cameras (raster.rasterise: the visible face
+and its perspective-correct barycentrics at each sample), each sample reading the texture
+bilinearly, SUPERSAMPLE^2 samples a pixel averaged (the photos are anti-aliased renders), and
+find the texture t whose drawing matches the photos best:
+
+    min_t  sum over pixels ||A t - photo||^2  +  WEIGHT * ||t - t_baked||^2
+
+(A: each pixel's texel weights). Only pixels inside the mesh's silhouette (all samples on the
+mesh) and the photo's (alpha >= 0.5, where it has one) count: a pixel at an edge mixes in the
+background. The prior keeps texels no pixel pins down at their baked colours. Conjugate gradients
+on the normal equations, ITERATIONS steps, all three channels at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy import sparse
+
+from windowshop.export.photos import Photos
+from windowshop.export.raster import rasterise
+from windowshop.scene.types import Camera
+
+SUPERSAMPLE = 2  # samples a pixel side
+WEIGHT = 0.05  # of the prior towards the baked colours, per texel (a pixel's weights sum to 1)
+ITERATIONS = 40  # conjugate-gradient steps
+
+
+def texel_weights(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(index (N, 4), weight (N, 4)): the texels of a `size` x `size` texture that bilinear
+    sampling at `uv` (N, 2) reads (grid_sample's, align_corners=False, edges clamped)."""
+    x, y = uv[:, 0] * size - 0.5, uv[:, 1] * size - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    xs = np.clip(np.stack([x0, x0 + 1, x0, x0 + 1], -1), 0, size - 1).astype(np.int64)
+    ys = np.clip(np.stack([y0, y0, y0 + 1, y0 + 1], -1), 0, size - 1).astype(np.int64)
+    weight = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], -1)
+    return ys * size + xs, weight
+
+
+def view_rows(vertices: torch.Tensor, faces: torch.Tensor, uv: np.ndarray, camera: Camera,
+              alpha: np.ndarray | None, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                             np.ndarray]:
+    """The pixels of one view that count (see the module docstring): (pixel (P,) flat indices,
+    then row (N,), texel (N,), weight (N,): the texture's weights in the P pixels, rows
+    numbered 0..P-1)."""
+    k = SUPERSAMPLE
+    h, w = camera.height, camera.width
+    raster = rasterise(vertices, faces, camera.resized(w * k, h * k))
+    face = raster.face.numpy().reshape(h, k, w, k).transpose(0, 2, 1, 3).reshape(h * w, k * k)
+    bary = raster.bary.numpy().reshape(h, k, w, k, 3).transpose(0, 2, 1, 3, 4)
+    keep = (face >= 0).all(-1)
+    if alpha is not None:
+        keep &= alpha.reshape(-1) >= 0.5
+    pixel = np.flatnonzero(keep)
+    f = face[pixel].reshape(-1)  # (P k^2,)
+    weights = bary.reshape(h * w, k * k, 3)[pixel].reshape(-1, 3)
+    at = (weights[..., None] * uv[faces.numpy()[f]]).sum(1)
+    texel, weight = texel_weights(at, size)
+    row = np.repeat(np.arange(len(pixel)), k * k * 4)
+    return pixel, row, texel.reshape(-1), weight.reshape(-1) / (k * k)
+
+
+def system(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, photos: Photos,
+           size: int) -> tuple[sparse.csr_matrix, np.ndarray]:
+    """(A (P, size^2), photo (P, 3)): every counted pixel of every photo, its texel weights and
+    its colour."""
+    v = torch.as_tensor(vertices, dtype=torch.float64)
+    f = torch.as_tensor(faces, dtype=torch.int64)
+    rows, texels, weights, targets, first = [], [], [], [], 0
+    for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
+        pixel, row, texel, weight = view_rows(v, f, uv, camera, alpha, size)
+        rows.append(row + first)
+        texels.append(texel)
+        weights.append(weight)
+        targets.append(image.reshape(-1, 3)[pixel])
+        first += len(pixel)
+    a = sparse.csr_matrix((np.concatenate(weights), (np.concatenate(rows),
+                                                      np.concatenate(texels))),
+                          shape=(first, size * size))
+    return a, np.concatenate(targets).astype(np.float64)
+
+
+def conjugate_gradients(apply, rhs: np.ndarray, iterations: int) -> np.ndarray:
+    """x (N, C) solving apply(x) = `rhs` (N, C), `apply` symmetric positive definite, each
+    column its own conjugate-gradient run, `iterations` steps from zero."""
+    x = np.zeros_like(rhs)
+    r = rhs.copy()
+    p = r.copy()
+    rr = (r * r).sum(0)
+    for _ in range(iterations):
+        q = apply(p)
+        step = rr / np.maximum((p * q).sum(0), 1e-30)
+        x += step * p
+        r -= step * q
+        new = (r * r).sum(0)
+        p = r + (new / np.maximum(rr, 1e-30)) * p
+        rr = new
+    return x
+
+
+def refine_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, image: np.ndarray,
+                   photos: Photos) -> np.ndarray:
+    """(S, S, 3) float32: the texture `image` (S, S, 3) in [0, 1] of the mesh `vertices` (V, 3),
+    `faces` (F, 3), `uv` (V, 2) (glTF's), refined against `photos` (see the module docstring)."""
+    size = image.shape[0]
+    a, target = system(vertices, faces, uv, photos, size)
+    used = np.flatnonzero(np.asarray(a.getnnz(0)) > 0)  # texels no pixel reads stay as baked
+    a = a[:, used].tocsr()
+    at = a.T.tocsr()
+    start = image.reshape(-1, 3).astype(np.float64)
+    residual = target - a @ start[used]
+    delta = conjugate_gradients(lambda x: at @ (a @ x) + WEIGHT * x, at @ residual, ITERATIONS)
+    out = start.copy()
+    out[used] += delta
+    return np.clip(out, 0.0, 1.0).reshape(image.shape).astype(np.float32)

@@ -8,11 +8,12 @@ from scipy import ndimage
 from export_helpers import square
 from windowshop.export.photos import Photos
 from windowshop.export.raster import render_mesh
-from windowshop.export.refine import SUPERSAMPLE, refine_texture
+from windowshop.export.refine import refine_texture
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
 SIZE = 32  # texels a side
+SUPERSAMPLE = 2  # samples a pixel side of the photos (anti-aliased)
 UV = np.array([[2.0, 30.0], [30.0, 30.0], [30.0, 2.0], [2.0, 2.0]]) / SIZE  # the square's texels
 
 

@@ -9,7 +9,7 @@
                       -> the model frame: +Y up, standing at the origin (frame.model_frame)
                       -> UVs and the base colour baked from the photos, the field's where no
                          photo sees the surface (texture, photos)
-                      -> that texture refined by least squares against the photos (refine)
+                      -> that texture refined by least squares against all the photos (refine)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.
@@ -92,6 +92,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     lap("mesh")
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
+    every_photo = photos if options.bake_views > 0 else None  # the refinement takes them all
     photos = photos.spread(options.bake_views) if photos and options.bake_views > 0 else None
     if photos is not None and options.settle:
         mesh = settle(mesh, photos, cell)
@@ -104,9 +105,9 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         lap("unwrap")
         image = tex.bake_image(run.model, unwrapped, options.texture, depths, photos, cell)
         lap("bake")
-        if photos is not None and options.refine:
+        if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
-                                   photos)
+                                   every_photo)
             lap("refine")
         texture = tex.finish_texture(image, options.texture)
         surface = unwrapped

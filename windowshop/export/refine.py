@@ -5,15 +5,21 @@ Projecting photos onto the mesh (photos.py) averages each texel's colour over th
 the mesh lies a little off the photographed surface, or a texel is smeared over a pixel, the
 average blurs. Instead, draw the mesh at the photos' cameras (raster.rasterise: the visible face
 and its perspective-correct barycentrics at each sample), each sample reading the texture
-bilinearly, SUPERSAMPLE^2 samples a pixel averaged (the photos are anti-aliased renders), and
-find the texture t whose drawing matches the photos best:
+bilinearly (SUPERSAMPLE^2 samples a pixel averaged, when more than one), and find the texture t
+whose drawing matches the photos best:
 
     min_t  sum over pixels ||A t - photo||^2  +  WEIGHT * ||t - t_baked||^2
 
-(A: each pixel's texel weights). Only pixels inside the mesh's silhouette (all samples on the
-mesh) and the photo's (alpha >= 0.5, where it has one) count: a pixel at an edge mixes in the
-background. The prior keeps texels no pixel pins down at their baked colours. Conjugate gradients
-on the normal equations, ITERATIONS steps, all three channels at once.
+(A: each pixel's texel weights), over every pixel the mesh covers (all its samples) in all the
+training photos, not only the bake's few: the mesh is not quite where the photographed surface
+is, and the more views the texture must agree with, the better it holds at views between them.
+The prior keeps texels few pixels pin down near their baked colours. Conjugate gradients on the
+normal equations, ITERATIONS steps, all three channels at once.
+Lego 400x400, 950 steps, 8 held-out views, PSNR anti-aliased: baked 24.81 dB; refined on the 24
+bake photos 25.12, on 48 25.51, on all 100 25.71. Also tried: only pixels inside the photo's
+alpha (>= 0.5) count, 0.1 dB worse (a mesh edge drawn over the background is best pale);
+pixels near the mesh's silhouette and occluding edges weighted down (photos.edge_ramp), 0.25 dB
+worse; 2x2 samples a pixel, +0.05 dB at 4x the time.
 """
 
 from __future__ import annotations
@@ -26,9 +32,9 @@ from windowshop.export.photos import Photos
 from windowshop.export.raster import rasterise
 from windowshop.scene.types import Camera
 
-SUPERSAMPLE = 2  # samples a pixel side
-WEIGHT = 0.05  # of the prior towards the baked colours, per texel (a pixel's weights sum to 1)
-ITERATIONS = 40  # conjugate-gradient steps
+SUPERSAMPLE = 1  # samples a pixel side
+WEIGHT = 0.2  # of the prior towards the baked colours, per texel (a pixel's weights sum to 1)
+ITERATIONS = 30  # conjugate-gradient steps
 
 
 def texel_weights(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -44,8 +50,7 @@ def texel_weights(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def view_rows(vertices: torch.Tensor, faces: torch.Tensor, uv: np.ndarray, camera: Camera,
-              alpha: np.ndarray | None, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                             np.ndarray]:
+              size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pixels of one view that count (see the module docstring): (pixel (P,) flat indices,
     then row (N,), texel (N,), weight (N,): the texture's weights in the P pixels, rows
     numbered 0..P-1)."""
@@ -54,10 +59,7 @@ def view_rows(vertices: torch.Tensor, faces: torch.Tensor, uv: np.ndarray, camer
     raster = rasterise(vertices, faces, camera.resized(w * k, h * k))
     face = raster.face.numpy().reshape(h, k, w, k).transpose(0, 2, 1, 3).reshape(h * w, k * k)
     bary = raster.bary.numpy().reshape(h, k, w, k, 3).transpose(0, 2, 1, 3, 4)
-    keep = (face >= 0).all(-1)
-    if alpha is not None:
-        keep &= alpha.reshape(-1) >= 0.5
-    pixel = np.flatnonzero(keep)
+    pixel = np.flatnonzero((face >= 0).all(-1))
     f = face[pixel].reshape(-1)  # (P k^2,)
     weights = bary.reshape(h * w, k * k, 3)[pixel].reshape(-1, 3)
     at = (weights[..., None] * uv[faces.numpy()[f]]).sum(1)
@@ -73,8 +75,8 @@ def system(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, photos: Phot
     v = torch.as_tensor(vertices, dtype=torch.float64)
     f = torch.as_tensor(faces, dtype=torch.int64)
     rows, texels, weights, targets, first = [], [], [], [], 0
-    for camera, image, alpha in zip(photos.cameras, photos.images, photos.alphas):
-        pixel, row, texel, weight = view_rows(v, f, uv, camera, alpha, size)
+    for camera, image in zip(photos.cameras, photos.images):
+        pixel, row, texel, weight = view_rows(v, f, uv, camera, size)
         rows.append(row + first)
         texels.append(texel)
         weights.append(weight)

@@ -72,7 +72,7 @@ def system(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, photos: Phot
            size: int) -> tuple[sparse.csr_matrix, np.ndarray]:
     """(A (P, size^2), photo (P, 3)): every counted pixel of every photo, its texel weights and
     its colour."""
-    v = torch.as_tensor(vertices, dtype=torch.float64)
+    v = torch.as_tensor(vertices, dtype=torch.float32)
     f = torch.as_tensor(faces, dtype=torch.int64)
     rows, texels, weights, targets, first = [], [], [], [], 0
     for camera, image in zip(photos.cameras, photos.images):

@@ -140,3 +140,15 @@ def test_an_empty_field_fails_clearly(object_run, tmp_path):
     torch.save(state, tmp_path / "empty" / "checkpoint.pt")
     with pytest.raises(UserError, match="no object"):
         export_models(tmp_path / "empty", [tmp_path / "m.glb"], SMALL)
+
+
+def test_folded_fins_cancel_in_pairs_and_leave_the_surface_closed():
+    from windowshop.export.mesh import drop_fins
+
+    tetra = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    # a triple on one face's vertices (a fin meeting the surface) and a fin pair off it
+    faces = np.concatenate([tetra, [[0, 1, 2], [1, 0, 2]], [[0, 1, 4], [1, 0, 4]]])
+    kept = drop_fins(faces)
+    assert len(kept) == 4 and not np.isin(4, kept)
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)
+    assert open_edges(Mesh(vertices, kept)) == 0

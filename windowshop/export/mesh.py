@@ -114,10 +114,14 @@ def decimate(mesh: Mesh, triangles: int) -> Mesh:
 
 def drop_fins(faces: np.ndarray) -> np.ndarray:
     """`faces` (F, 3) without the pairs of faces on the same three vertices: the flat fins an
-    edge collapse leaves where a thin part folded shut (they enclose nothing)."""
-    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
-                                   return_counts=True)
-    return faces[counts[inverse.reshape(-1)] == 1]
+    edge collapse leaves where a thin part folded shut (they enclose nothing). Faces cancel in
+    pairs: of an odd number on the same vertices (three, where a fin meets the surface) one
+    stays, or the surface would open there."""
+    _, first, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True,
+                                          return_inverse=True, return_counts=True)
+    keep = np.zeros(len(faces), dtype=bool)
+    keep[first[counts % 2 == 1]] = True
+    return faces[keep]
 
 
 def open_edges(mesh: Mesh) -> int:

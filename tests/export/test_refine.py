@@ -57,7 +57,7 @@ def test_a_wrong_texture_is_refined_to_the_photographed_one(wrong):
     assert before > 0.05
     assert after < 0.02
     # and a view no photo was taken from sees it right too
-    camera, seen = photographed(truth, [0.6, -0.6, 1.7])
+    _, seen = photographed(truth, [0.6, -0.6, 1.7])
     _, drawn = photographed(refined, [0.6, -0.6, 1.7])
     assert np.abs(drawn - seen).mean() < 0.2 * np.abs(photographed(start, [0.6, -0.6, 1.7])[1]
                                                       - seen).mean()

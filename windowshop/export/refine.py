@@ -91,7 +91,9 @@ def system(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, photos: Phot
 
 def conjugate_gradients(apply, rhs: np.ndarray, iterations: int) -> np.ndarray:
     """x (N, C) solving apply(x) = `rhs` (N, C), `apply` symmetric positive definite, each
-    column its own conjugate-gradient run, `iterations` steps from zero."""
+    column its own conjugate-gradient run, `iterations` steps from zero. (scipy's cg takes one
+    column a call: three passes over the sparse system instead of one, 10% more refine time on
+    lego.)"""
     x = np.zeros_like(rhs)
     r = rhs.copy()
     p = r.copy()

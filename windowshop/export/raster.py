@@ -3,7 +3,9 @@
 Each triangle tests the pixel centres of its bounding box (grouped by box size, so the work is
 batched), keeps those inside it, and the nearest triangle at each pixel wins one scatter-min over
 (depth, face) keys; colour comes from the winning face, perspective-correct, from the texture
-(bilinear) or the vertex colours. Pure PyTorch, any device.
+(bilinear) or the vertex colours. Pure PyTorch, any device; on the CPU the z-buffer is the C
+kernel's (field/kernels.c rasterise_faces: the same tests in one pass over the faces; a
+400x400 view of a 100k-triangle mesh in 25 ms against 195, one thread).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from windowshop.field import kernels
 from windowshop.scene.types import Camera
 
 FACE_BITS = 21  # faces per mesh < 2^21 (keys: quantised depth above, face index below)
@@ -55,9 +58,29 @@ def _edge_weights(tri: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
 @torch.no_grad()
 def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
               near: float = 1e-3) -> Raster:
-    """The faces (F, 3) of `vertices` (V, 3) that `camera` sees at each pixel centre."""
+    """The faces (F, 3) of `vertices` (V, 3) that `camera` sees at each pixel centre (the C
+    kernel where it runs, else the pure-PyTorch twin)."""
     h, w = camera.height, camera.width
     xy, depth = screen(vertices, camera)
+    if kernels.available(xy.device):
+        face = kernels.rasterise_faces(xy.double().contiguous(), depth.double().contiguous(),
+                                       faces.contiguous(), w, h, near)
+    else:
+        face = nearest_faces(xy, depth, faces, w, h, near)
+    tri_xy, tri_depth = xy[faces], depth[faces]
+    bary = torch.zeros(h * w, 3, device=xy.device, dtype=xy.dtype)
+    pixels = (face >= 0).nonzero()[:, 0]
+    f = face[pixels]
+    centre = torch.stack([pixels % w, pixels // w], -1).to(xy) + 0.5
+    weights = _edge_weights(tri_xy[f], centre) / tri_depth[f]
+    bary[pixels] = weights / weights.sum(-1, keepdim=True)
+    return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
+
+
+def nearest_faces(xy: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, w: int, h: int,
+                  near: float) -> torch.Tensor:
+    """(H*W,) the nearest of `faces` at each pixel centre (-1: none), vertices at pixel
+    coordinates `xy` (V, 2) and depths `depth` (V,): the pure-PyTorch twin of the C kernel."""
     tri_xy, tri_depth = xy[faces], depth[faces]  # (F, 3, 2), (F, 3)
     front = (tri_depth > near).all(-1)
     lo = torch.ceil(tri_xy.amin(1) - 0.5).clamp(min=0)
@@ -86,14 +109,7 @@ def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
             keys.scatter_reduce_(0, index[ok], key[ok], "amin")
         size *= 2
     hit = keys != torch.iinfo(torch.int64).max
-    face = torch.where(hit, keys % 2**FACE_BITS, torch.full_like(keys, -1))
-    bary = torch.zeros(h * w, 3, device=xy.device, dtype=xy.dtype)
-    pixels = hit.nonzero()[:, 0]
-    f = face[pixels]
-    centre = torch.stack([pixels % w, pixels // w], -1).to(xy) + 0.5
-    weights = _edge_weights(tri_xy[f], centre) / tri_depth[f]
-    bary[pixels] = weights / weights.sum(-1, keepdim=True)
-    return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
+    return torch.where(hit, keys % 2**FACE_BITS, torch.full_like(keys, -1))
 
 
 @torch.no_grad()

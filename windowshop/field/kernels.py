@@ -43,6 +43,7 @@ _SIGNATURES = {
     "composite_rays_backward": [_I, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _P,
                                 _P, _P],
     "render_composite": [_P, _P, _P, _P, _P],
+    "rasterise_faces": [_P, _P, _P, _I, _I, _I, ctypes.c_double, _P, _P],
 }
 
 
@@ -298,3 +299,15 @@ def render_composite(origins: torch.Tensor, directions: torch.Tensor, t_min: tor
     counts = torch.empty(r, dtype=torch.int64)
     library().render_composite(ctypes.byref(args), _ptr(out), _ptr(opacity), _ptr(depth), _ptr(counts))
     return out, counts, opacity, depth
+
+
+@_profiled
+def rasterise_faces(xy: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, width: int,
+                    height: int, near: float) -> torch.Tensor:
+    """(H*W,) int64: the nearest of `faces` (F, 3) int64 at each pixel centre, -1 where none, of
+    vertices at pixel coordinates `xy` (V, 2) and depths `depth` (V,) float64 (see kernels.c)."""
+    face = torch.empty(width * height, dtype=torch.int64)
+    zbuf = torch.empty(width * height, dtype=torch.float64)
+    library().rasterise_faces(_ptr(xy), _ptr(depth), _ptr(faces), faces.shape[0], width, height,
+                              near, _ptr(zbuf), _ptr(face))
+    return face

@@ -120,7 +120,10 @@ def refine_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, imag
     at = a.T.tocsr()
     start = image.reshape(-1, 3).astype(np.float64)
     residual = target - a @ start[used]
-    delta = conjugate_gradients(lambda x: at @ (a @ x) + WEIGHT * x, at @ residual, ITERATIONS)
+    # A^T A once (lego 400: 1 s, 4.5M entries against A's 19M): each step is then one product
+    # with it (9 ms) instead of one with A and one with A^T (350 ms)
+    normal = (at @ a).tocsr()
+    delta = conjugate_gradients(lambda x: normal @ x + WEIGHT * x, at @ residual, ITERATIONS)
     out = start.copy()
     out[used] += delta
     return np.clip(out, 0.0, 1.0).reshape(image.shape).astype(np.float32)

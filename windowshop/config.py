@@ -87,6 +87,8 @@ class FastConfig:
     # a frame by under one 8-bit level (48-54 dB against 0.5) and marches 1.5x fewer samples
     render_step: float = 0.75
     alpha_init: float = 1e-2  # opacity of one final-resolution step at initialisation
+    # Learning rates: swept at the steps the budgets give (bench/RESULTS.md, "learning rates");
+    # nothing gains on lego without losing on temple or lego_tiny
     lr_grid: float = 0.2  # Adam on both grids ...
     lr_mlp: float = 1e-2  # ... and on the MLP
     lr_final: float = 0.3  # learning rates decay exponentially to this factor

@@ -15,7 +15,7 @@ from windowshop.config import ExportOptions
 from windowshop.errors import UserError
 from windowshop.export.command import export_models, side_file
 from windowshop.export.frame import apply
-from windowshop.export.mesh import Mesh, open_edges
+from windowshop.export.mesh import Mesh, drop_fins, open_edges
 from windowshop.rays import project
 
 SMALL = ExportOptions(triangles=1500, texture=256, resolution=48)
@@ -143,8 +143,6 @@ def test_an_empty_field_fails_clearly(object_run, tmp_path):
 
 
 def test_folded_fins_cancel_in_pairs_and_leave_the_surface_closed():
-    from windowshop.export.mesh import drop_fins
-
     tetra = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
     # a triple on one face's vertices (a fin meeting the surface) and a fin pair off it
     faces = np.concatenate([tetra, [[0, 1, 2], [1, 0, 2]], [[0, 1, 4], [1, 0, 4]]])

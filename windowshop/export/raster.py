@@ -67,12 +67,11 @@ def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
                                        faces.contiguous(), w, h, near)
     else:
         face = nearest_faces(xy, depth, faces, w, h, near)
-    tri_xy, tri_depth = xy[faces], depth[faces]
     bary = torch.zeros(h * w, 3, device=xy.device, dtype=xy.dtype)
     pixels = (face >= 0).nonzero()[:, 0]
-    f = face[pixels]
+    tri = faces[face[pixels]]  # (P, 3): the visible face's corners at each covered pixel
     centre = torch.stack([pixels % w, pixels // w], -1).to(xy) + 0.5
-    weights = _edge_weights(tri_xy[f], centre) / tri_depth[f]
+    weights = _edge_weights(xy[tri], centre) / depth[tri]
     bary[pixels] = weights / weights.sum(-1, keepdim=True)
     return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
 

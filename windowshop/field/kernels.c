@@ -4,8 +4,9 @@
  *
  * Plain C (no torch headers) so it compiles in well under a second; windowshop/field/kernels.py
  * builds it on first use, caches the library and calls it through ctypes. Each function has a
- * pure-PyTorch twin (grid.py, occupancy.py, optim.py, export/raster.py) that the tests hold it to; floating-point
- * contraction is disabled at compile time so both evaluate the same expressions the same way.
+ * pure-PyTorch twin (grid.py, occupancy.py, optim.py, export/raster.py) that the tests hold it
+ * to; floating-point contraction is disabled at compile time so both evaluate the same
+ * expressions the same way.
  *
  * Layouts: a grid of X*Y*Z vertices with C channels is a row-major (X, Y, Z, C) float array;
  * points are in grid units, vertex (i, j, k) at (i, j, k). Corner c = 4*dx + 2*dy + dz.

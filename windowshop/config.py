@@ -188,6 +188,7 @@ class ExportOptions:
     level_views: int = 8  # training views whose silhouettes choose the surface's density level
     bake_views: int = 24  # training photos projected onto the mesh for its colour (0: the field's)
     settle: bool = True  # move the surface to where those photos agree (export/settle.py)
+    tune: bool = True  # move the surface to match all the photos and their masks (export/tune.py)
     refine: bool = True  # fit the texture to all the photos by least squares (export/refine.py)
     keep_share: float = 0.05  # pieces under this share of the largest piece's area are dropped
     roughness: float = 0.8  # of the PBR material (never metallic)

@@ -12,7 +12,7 @@ from windowshop.export.texture import Unwrapped, bake_size
 def test_photos_coarser_than_the_texels_bake_a_coarser_texture():
     vertices, faces = square(0.0, 0.5)  # one world unit square, 4 units from the camera
     uv = np.array([[0.0, 0.5], [0.5, 0.5], [0.5, 0.0], [0.0, 0.0]])  # a quarter of the texture
-    unwrapped = Unwrapped(vertices, faces, np.tile([0.0, 0.0, 1.0], (4, 1)), uv)
+    unwrapped = Unwrapped(vertices, faces, np.tile([0.0, 0.0, 1.0], (4, 1)), uv, np.arange(4))
     texels = 1024  # a side of 2048 texels, half of it across one unit
 
     def photo_with(pixels_per_unit: float) -> Photos:

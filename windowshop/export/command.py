@@ -6,10 +6,11 @@
                       -> the lattice carved by the photos' masks, where they have any (carve)
                       -> marching cubes, largest pieces, decimation (mesh.object_mesh)
                       -> moved to where the photos agree (settle)
-                      -> the model frame: +Y up, standing at the origin (frame.model_frame)
                       -> UVs and the base colour baked from the photos, the field's where no
                          photo sees the surface (texture, photos)
+                      -> moved again to match all the photos and their masks (tune)
                       -> that texture refined by least squares against all the photos (refine)
+                      -> the model frame: +Y up, standing at the origin (frame.model_frame)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.
@@ -66,6 +67,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.photos import training_photos
     from windowshop.export.refine import refine_texture
     from windowshop.export.settle import settle
+    from windowshop.export.tune import tune_surface
     from windowshop.fit.checkpoint import load_run
 
     check_options(options)
@@ -97,7 +99,6 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     if photos is not None and options.settle:
         mesh = settle(mesh, photos, cell)
         lap("settle")
-    frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     depths = tuple(d * cell for d in BAKE_DEPTHS)
     uv = texture = None
     if options.texture > 0:
@@ -105,6 +106,10 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         lap("unwrap")
         image = tex.bake_image(run.model, unwrapped, options.texture, depths, photos, cell)
         lap("bake")
+        if every_photo is not None and options.tune:
+            mesh = tune_surface(mesh, unwrapped.uv[unwrapped.faces], image, every_photo, cell)
+            unwrapped = tex.moved(unwrapped, mesh)
+            lap("tune")
         if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
                                    every_photo)
@@ -116,6 +121,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     else:
         surface, normals = mesh, vertex_normals(mesh)
         vertices, faces = mesh.vertices, mesh.faces
+    frame = model_frame(mesh.vertices, run.transform, options.size_cm)
     colours = None
     if vertex_colours or texture is None:
         occluders = None if photos is None else tex.surface_samples(surface)

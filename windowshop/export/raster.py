@@ -58,22 +58,36 @@ def _edge_weights(tri: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
 @torch.no_grad()
 def rasterise(vertices: torch.Tensor, faces: torch.Tensor, camera: Camera,
               near: float = 1e-3) -> Raster:
-    """The faces (F, 3) of `vertices` (V, 3) that `camera` sees at each pixel centre (the C
-    kernel where it runs, else the pure-PyTorch twin)."""
+    """The faces (F, 3) of `vertices` (V, 3) that `camera` sees at each pixel centre."""
     h, w = camera.height, camera.width
     xy, depth = screen(vertices, camera)
-    if kernels.available(xy.device):
-        face = kernels.rasterise_faces(xy.double().contiguous(), depth.double().contiguous(),
-                                       faces.contiguous(), w, h, near)
-    else:
-        face = nearest_faces(xy, depth, faces, w, h, near)
+    face = visible_faces(xy, depth, faces, w, h, near)
     bary = torch.zeros(h * w, 3, device=xy.device, dtype=xy.dtype)
     pixels = (face >= 0).nonzero()[:, 0]
-    tri = faces[face[pixels]]  # (P, 3): the visible face's corners at each covered pixel
+    bary[pixels] = barycentrics(xy, depth, faces[face[pixels]], pixels, w)
+    return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
+
+
+def barycentrics(xy: torch.Tensor, depth: torch.Tensor, tri: torch.Tensor, pixels: torch.Tensor,
+                 w: int) -> torch.Tensor:
+    """(P, 3) perspective-correct barycentric weights at the centres of `pixels` (P,) (flat
+    indices, `w` a row) of the faces `tri` (P, 3) drawn there; vertices at pixel coordinates
+    `xy` (V, 2), depths `depth` (V,). Differentiable in both."""
     centre = torch.stack([pixels % w, pixels // w], -1).to(xy) + 0.5
     weights = _edge_weights(xy[tri], centre) / depth[tri]
-    bary[pixels] = weights / weights.sum(-1, keepdim=True)
-    return Raster(face=face.view(h, w), bary=bary.view(h, w, 3))
+    return weights / weights.sum(-1, keepdim=True)
+
+
+@torch.no_grad()
+def visible_faces(xy: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, w: int, h: int,
+                  near: float = 1e-3) -> torch.Tensor:
+    """(H*W,) the nearest of `faces` at each pixel centre (-1: none), vertices at pixel
+    coordinates `xy` (V, 2) and depths `depth` (V,): the C kernel where it runs, else the
+    pure-PyTorch twin."""
+    if kernels.available(xy.device):
+        return kernels.rasterise_faces(xy.double().contiguous(), depth.double().contiguous(),
+                                       faces.contiguous(), w, h, near)
+    return nearest_faces(xy, depth, faces, w, h, near)
 
 
 def nearest_faces(xy: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, w: int, h: int,

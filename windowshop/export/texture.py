@@ -21,7 +21,7 @@ reads the background.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -48,6 +48,14 @@ class Unwrapped:
     faces: np.ndarray  # (F, 3) int64
     normals: np.ndarray  # (V', 3) unit
     uv: np.ndarray  # (V', 2) in [0, 1], glTF's convention: v = 0 at the image's top row
+    source: np.ndarray  # (V',) the vertex of the unsplit mesh each vertex is a copy of
+
+
+def moved(unwrapped: Unwrapped, mesh: Mesh) -> Unwrapped:
+    """`unwrapped` with the vertices and normals of `mesh`, the unsplit mesh it was made from
+    after its vertices moved."""
+    return replace(unwrapped, vertices=mesh.vertices[unwrapped.source],
+                   normals=vertex_normals(mesh)[unwrapped.source])
 
 
 def chart_labels(mesh: Mesh) -> np.ndarray:
@@ -120,7 +128,7 @@ def unwrap(mesh: Mesh, size: int) -> Unwrapped:
     texel = (flat - lo[pairs[:, 1]]) * scale + corners[pairs[:, 1]] + PADDING
     out = Mesh(vertices=mesh.vertices[pairs[:, 0]], faces=inverse.reshape(-1, 3))
     return Unwrapped(vertices=out.vertices, faces=out.faces,
-                     normals=vertex_normals(mesh)[pairs[:, 0]], uv=texel / size)
+                     normals=vertex_normals(mesh)[pairs[:, 0]], uv=texel / size, source=pairs[:, 0])
 
 
 def rasterise(uv: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:

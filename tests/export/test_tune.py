@@ -1,0 +1,104 @@
+"""The surface tuned against the photos: the outline's anti-aliased coverage against the areas a
+pixel's box holds, its gradient, the silhouette edges of a cube, and a sphere drawn too small
+growing to the photographed one."""
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from windowshop.export.mesh import Mesh
+from windowshop.export.photos import Photos
+from windowshop.export.raster import render_mesh, visible_faces
+from windowshop.export.tune import manifold_edges, outline_coverage, silhouette_edges, tune_surface
+from windowshop.field import kernels
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+
+
+@pytest.fixture(params=["kernel", "twin"])
+def path(request, monkeypatch):
+    """Each test on both z-buffers (the twin alone where no C compiler is found)."""
+    if request.param == "kernel" and not kernels.available("cpu"):
+        pytest.skip("no C compiler")
+    if request.param == "twin":
+        monkeypatch.setattr(kernels, "available", lambda device: False)
+
+
+def screen_square(x0, y0, x1, y1):
+    """Two faces covering [x0, x1] x [y0, y1] in pixel coordinates, all at depth 1, their
+    boundary edges, and the pixels they cover in a 16x16 image."""
+    xy = torch.tensor([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=torch.float64,
+                      requires_grad=True)
+    faces = torch.tensor([[0, 1, 2], [0, 2, 3]])
+    covered = visible_faces(xy.detach(), torch.ones(4, dtype=torch.float64), faces, 16, 16) >= 0
+    return xy, torch.tensor([[0, 1], [1, 2], [2, 3], [3, 0]]), covered.view(16, 16)
+
+
+def coverage_at(pixels, coverage, index):
+    return coverage[(pixels == index).nonzero()[0, 0]]
+
+
+def test_the_outline_covers_what_the_pixel_box_holds(path):
+    # edges at x = 3.6 and 11.3, y = 2.4 and 9.8: the pixels astride them are covered by the
+    # fractions 0.4, 0.3, 0.6 and 0.8 (away from the corners)
+    xy, edges, covered = screen_square(3.6, 2.4, 11.3, 9.8)
+    pixels, coverage = outline_coverage(xy, edges, covered)
+    row, col = 6, 7
+    assert float(coverage_at(pixels, coverage, row * 16 + 3)) == pytest.approx(0.4, abs=1e-6)
+    assert float(coverage_at(pixels, coverage, row * 16 + 11)) == pytest.approx(0.3, abs=1e-6)
+    assert float(coverage_at(pixels, coverage, 2 * 16 + col)) == pytest.approx(0.6, abs=1e-6)
+    assert float(coverage_at(pixels, coverage, 9 * 16 + col)) == pytest.approx(0.8, abs=1e-6)
+    assert float(coverage_at(pixels, coverage, row * 16 + 4)) == 1.0  # inside: whole
+
+
+def test_the_outline_moves_with_its_edge_as_finite_differences_say(path):
+    xy, edges, covered = screen_square(3.6, 2.4, 11.3, 9.8)
+    pixels, coverage = outline_coverage(xy, edges, covered)
+    target = 6 * 16 + 11  # astride the right edge (x = 11.3)
+    coverage_at(pixels, coverage, target).backward()
+    step = 1e-4
+    moved = xy.detach().clone()
+    moved[[1, 2], 0] += step
+    p2, c2 = outline_coverage(moved, edges, covered)
+    numeric = (coverage_at(p2, c2, target) - coverage_at(pixels, coverage, target)) / step
+    assert float(xy.grad[[1, 2], 0].sum()) == pytest.approx(float(numeric), abs=1e-4)
+    assert float(numeric) == pytest.approx(1.0, abs=1e-4)  # an edge moved by d covers d more
+
+
+def test_a_cube_seen_from_a_corner_has_six_silhouette_edges():
+    cube = trimesh.creation.box()
+    edges, sides = manifold_edges(np.asarray(cube.faces))
+    assert len(edges) == 18  # 12 cube edges and 6 diagonals, each between two faces
+    outline = silhouette_edges(torch.as_tensor(cube.vertices, dtype=torch.float32),
+                               torch.as_tensor(cube.faces), torch.as_tensor(edges),
+                               torch.as_tensor(sides), torch.tensor([3.0, 5.0, 7.0]))
+    assert len(outline) == 6
+
+
+def ring_photos(mesh: trimesh.Trimesh, size: int = 48) -> Photos:
+    """`mesh` drawn grey on white from 8 cameras around it, with its masks (2x2 samples a pixel)."""
+    cameras, images, alphas = [], [], []
+    for angle in np.linspace(0, 2 * np.pi, 8, endpoint=False):
+        eye = 4.0 * np.array([np.cos(angle), np.sin(angle), 0.4])
+        camera = Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size,
+                        c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0])))
+        colours = np.full((len(mesh.vertices), 3), 128, np.uint8)
+        image, mask = render_mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces),
+                                  camera.resized(2 * size, 2 * size), colours=colours)
+        cameras.append(camera)
+        images.append(image.reshape(size, 2, size, 2, 3).mean((1, 3)).astype(np.float32))
+        alphas.append(mask.reshape(size, 2, size, 2).mean((1, 3)).astype(np.float32))
+    return Photos(cameras, images, alphas)
+
+
+@pytest.mark.parametrize("drawn", [0.85, 1.15])
+def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(path, drawn):
+    photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
+    start = trimesh.creation.icosphere(subdivisions=3, radius=drawn)
+    mesh = Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
+    grey = np.full((8, 8, 3), 128 / 255, np.float32)
+    # a cell about a pixel (12 pixels a unit), as in an export: the surface 2 cells off
+    tuned = tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=0.08)
+    radius = np.linalg.norm(tuned.vertices, axis=1)
+    assert abs(np.median(radius) - 1.0) < 0.4 * abs(drawn - 1.0)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 import torch.nn.functional as F
+from scipy import sparse
 
 from windowshop.export.mesh import Mesh, vertex_normals
 from windowshop.export.photos import Photos
@@ -161,9 +162,10 @@ def tune_surface(mesh: Mesh, corner_uv: np.ndarray, texture: np.ndarray, photos:
     edges, sides = (torch.as_tensor(x) for x in manifold_edges(mesh.faces))
     uv = torch.as_tensor(corner_uv, dtype=torch.float32)
     image = torch.as_tensor(texture, dtype=torch.float32).permute(2, 0, 1)[None]
-    mean = neighbour_mean(mesh).tocoo()
-    mean = torch.sparse_coo_tensor(np.stack([mean.row, mean.col]), mean.data, mean.shape,
-                                   dtype=torch.float32, check_invariants=True)
+    laplacian = sparse.eye(len(base)) - neighbour_mean(mesh)
+    # the penalty's gradient, 2 SMOOTH L^T L x / V, by hand: through autograd the sparse product
+    # and its backward took a third of the step
+    smoothing = ((2.0 * SMOOTH / len(base)) * (laplacian.T @ laplacian)).astype(np.float32).tocsr()
     offset = torch.zeros(len(base), requires_grad=True)
     optimiser = torch.optim.Adam([offset], lr=LEARNING_RATE)
     order = np.random.default_rng(0).permutation(len(photos.cameras))
@@ -172,12 +174,11 @@ def tune_surface(mesh: Mesh, corner_uv: np.ndarray, texture: np.ndarray, photos:
         photo = torch.as_tensor(photos.images[i], dtype=torch.float32).reshape(-1, 3)
         alpha = photos.alphas[i]
         alpha = None if alpha is None else torch.as_tensor(alpha, dtype=torch.float32).reshape(-1)
-        laplacian = offset - torch.sparse.mm(mean, offset[:, None])[:, 0]
-        loss = SMOOTH * (laplacian ** 2).mean() + photo_loss(
-            base + offset[:, None] * normals, faces, uv, image, edges, sides, photos.cameras[i],
-            photo, alpha)
+        loss = photo_loss(base + offset[:, None] * normals, faces, uv, image, edges, sides,
+                          photos.cameras[i], photo, alpha)
         optimiser.zero_grad()
         loss.backward()
+        offset.grad += torch.from_numpy(smoothing @ offset.detach().numpy())
         optimiser.step()
     moved = base + offset.detach()[:, None] * normals
     return Mesh(moved.numpy().astype(np.float64), mesh.faces)

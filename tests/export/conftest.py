@@ -1,4 +1,5 @@
-"""A briefly trained fast model of the built-in object (export_helpers.object_scene)."""
+"""A briefly trained fast model of the built-in object (export_helpers.object_scene), and the
+choice of z-buffer."""
 
 from pathlib import Path
 
@@ -17,3 +18,16 @@ def object_run(tmp_path_factory) -> Path:
     fit(object_scene(), "fast", model_config("fast", voxels=32**3), FitConfig(iters=150), out,
         "cpu", show_progress=False)
     return out
+
+
+@pytest.fixture(params=["kernel", "twin"])
+def zbuffer(request, monkeypatch):
+    """The test on both z-buffers: the C kernel and its pure-PyTorch twin (the twin alone where
+    no C compiler is found)."""
+    from windowshop.field import kernels
+
+    if request.param == "kernel" and not kernels.available("cpu"):
+        pytest.skip("no C compiler")
+    if request.param == "twin":
+        monkeypatch.setattr(kernels, "available", lambda device: False)
+    return request.param

@@ -13,24 +13,14 @@ from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
 
-@pytest.fixture(params=["kernel", "twin"])
-def path(request, monkeypatch):
-    """Every test on both z-buffers (the twin alone where no C compiler is found)."""
-    if request.param == "kernel" and not kernels.available("cpu"):
-        pytest.skip("no C compiler")
-    if request.param == "twin":
-        monkeypatch.setattr(kernels, "available", lambda device: False)
-    return request.param
-
-
-def test_a_square_covers_the_pixels_its_projection_covers(path):
+def test_a_square_covers_the_pixels_its_projection_covers(zbuffer):
     v, f = square(0.0, 1.0)  # at distance 4: 2 units wide = 20 pixels of a 40-pixel focal length
     _, silhouette = render_mesh(v, f, top_camera(), colours=np.zeros((4, 3), np.uint8))
     assert silhouette.sum() == 20 * 20
     assert silhouette[10:30, 10:30].all()
 
 
-def test_the_nearer_face_wins_and_texture_coordinates_reach_the_texture(path):
+def test_the_nearer_face_wins_and_texture_coordinates_reach_the_texture(zbuffer):
     near_v, near_f = square(1.0, 0.5)
     far_v, far_f = square(0.0, 1.0)
     vertices = np.concatenate([far_v, near_v])

@@ -11,18 +11,8 @@ from windowshop.export.mesh import Mesh
 from windowshop.export.photos import Photos
 from windowshop.export.raster import render_mesh, visible_faces
 from windowshop.export.tune import manifold_edges, outline_coverage, silhouette_edges, tune_surface
-from windowshop.field import kernels
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
-
-
-@pytest.fixture(params=["kernel", "twin"])
-def path(request, monkeypatch):
-    """Each test on both z-buffers (the twin alone where no C compiler is found)."""
-    if request.param == "kernel" and not kernels.available("cpu"):
-        pytest.skip("no C compiler")
-    if request.param == "twin":
-        monkeypatch.setattr(kernels, "available", lambda device: False)
 
 
 def screen_square(x0, y0, x1, y1):
@@ -39,11 +29,11 @@ def coverage_at(pixels, coverage, index):
     return coverage[(pixels == index).nonzero()[0, 0]]
 
 
-def test_the_outline_covers_what_the_pixel_box_holds(path):
+def test_the_outline_covers_what_the_pixel_box_holds(zbuffer):
     # edges at x = 3.6 and 11.3, y = 2.4 and 9.8: the pixels astride them are covered by the
     # fractions 0.4, 0.3, 0.6 and 0.8 (away from the corners)
     xy, edges, covered = screen_square(3.6, 2.4, 11.3, 9.8)
-    pixels, coverage = outline_coverage(xy, edges, covered)
+    pixels, coverage = outline_coverage(xy.detach(), edges, covered)
     row, col = 6, 7
     assert float(coverage_at(pixels, coverage, row * 16 + 3)) == pytest.approx(0.4, abs=1e-6)
     assert float(coverage_at(pixels, coverage, row * 16 + 11)) == pytest.approx(0.3, abs=1e-6)
@@ -52,7 +42,7 @@ def test_the_outline_covers_what_the_pixel_box_holds(path):
     assert float(coverage_at(pixels, coverage, row * 16 + 4)) == 1.0  # inside: whole
 
 
-def test_the_outline_moves_with_its_edge_as_finite_differences_say(path):
+def test_the_outline_moves_with_its_edge_as_finite_differences_say(zbuffer):
     xy, edges, covered = screen_square(3.6, 2.4, 11.3, 9.8)
     pixels, coverage = outline_coverage(xy, edges, covered)
     target = 6 * 16 + 11  # astride the right edge (x = 11.3)
@@ -93,7 +83,7 @@ def ring_photos(mesh: trimesh.Trimesh, size: int = 48) -> Photos:
 
 
 @pytest.mark.parametrize("drawn", [0.85, 1.15])
-def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(path, drawn):
+def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(zbuffer, drawn):
     photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
     start = trimesh.creation.icosphere(subdivisions=3, radius=drawn)
     mesh = Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
@@ -102,3 +92,14 @@ def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(path, drawn):
     tuned = tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=0.08)
     radius = np.linalg.norm(tuned.vertices, axis=1)
     assert abs(np.median(radius) - 1.0) < 0.4 * abs(drawn - 1.0)
+
+
+def test_without_masks_flat_colour_gives_no_reason_to_move(zbuffer):
+    photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
+    photos = Photos(photos.cameras, photos.images, [None] * len(photos.cameras))
+    start = trimesh.creation.icosphere(subdivisions=3, radius=0.85)
+    mesh = Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
+    grey = np.full((8, 8, 3), 128 / 255, np.float32)
+    tuned = tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=0.08)
+    # the photos' grey is the texture's wherever the mesh is drawn: no colour pulls it outwards
+    assert np.abs(tuned.vertices - mesh.vertices).max() < 0.08 * 0.05

@@ -1,4 +1,6 @@
-"""A small z-buffer rasteriser for checking an exported mesh against the photos (bench, tests).
+"""A small z-buffer rasteriser: the mesh drawn at the photos' cameras, to refine its texture
+(refine.py) and tune its surface (tune.py: the barycentrics are differentiable in the vertices),
+and to check an exported mesh against the photos (bench, tests).
 
 Each triangle tests the pixel centres of its bounding box (grouped by box size, so the work is
 batched), keeps those inside it, and the nearest triangle at each pixel wins one scatter-min over

@@ -83,24 +83,32 @@ def ring_photos(mesh: trimesh.Trimesh, size: int = 48) -> Photos:
     return Photos(cameras, images, alphas)
 
 
+CELL = 0.08  # about a pixel (12 pixels a unit), as in an export
+
+
+def grey_sphere(radius: float) -> Mesh:
+    """An icosphere of `radius`, to be drawn with a flat grey texture (see tuned)."""
+    start = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+    return Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
+
+
+def tuned(mesh: Mesh, photos: Photos) -> Mesh:
+    """`mesh` textured flat grey (the photos' own grey), tuned against `photos`."""
+    grey = np.full((8, 8, 3), 128 / 255, np.float32)
+    return tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=CELL)
+
+
 @pytest.mark.parametrize("drawn", [0.85, 1.15])
 def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(zbuffer, drawn):
     photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
-    start = trimesh.creation.icosphere(subdivisions=3, radius=drawn)
-    mesh = Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
-    grey = np.full((8, 8, 3), 128 / 255, np.float32)
-    # a cell about a pixel (12 pixels a unit), as in an export: the surface 2 cells off
-    tuned = tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=0.08)
-    radius = np.linalg.norm(tuned.vertices, axis=1)
+    # the surface starts about 2 cells off the photographed one
+    radius = np.linalg.norm(tuned(grey_sphere(drawn), photos).vertices, axis=1)
     assert abs(np.median(radius) - 1.0) < 0.4 * abs(drawn - 1.0)
 
 
 def test_without_masks_flat_colour_gives_no_reason_to_move(zbuffer):
     photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
     photos = Photos(photos.cameras, photos.images, [None] * len(photos.cameras))
-    start = trimesh.creation.icosphere(subdivisions=3, radius=0.85)
-    mesh = Mesh(np.asarray(start.vertices, dtype=np.float64), np.asarray(start.faces))
-    grey = np.full((8, 8, 3), 128 / 255, np.float32)
-    tuned = tune_surface(mesh, np.zeros((len(mesh.faces), 3, 2)), grey, photos, cell=0.08)
+    mesh = grey_sphere(0.85)
     # the photos' grey is the texture's wherever the mesh is drawn: no colour pulls it outwards
-    assert np.abs(tuned.vertices - mesh.vertices).max() < 0.08 * 0.05
+    assert np.abs(tuned(mesh, photos).vertices - mesh.vertices).max() < CELL * 0.05

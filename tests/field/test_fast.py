@@ -41,7 +41,7 @@ def trained(scene, steps=40, **overrides):
     white = torch.ones(1024, 3)
     for step in range(steps):
         for hook in schedule:
-            hook.before_step(StepInfo(model, optimizer, step, step / steps))
+            hook.before_step(StepInfo(model, optimizer, step, step / steps, 1024))
         pick = torch.randint(len(origins), (1024,))
         out = model.render_rays(origins[pick], directions[pick], white)
         optimizer.zero_grad()

@@ -127,7 +127,7 @@ def test_learning_rate_decays_exponentially_to_the_final_rate():
     optimizer.param_groups[0]["initial_lr"] = 5e-4
     (schedule,) = schedule_for(model)
     for fraction, factor in ((0.0, 1.0), (1.0, 0.1), (0.5, 0.1 ** 0.5), (2.0, 0.1)):
-        schedule.before_step(StepInfo(model, optimizer, 0, fraction))
+        schedule.before_step(StepInfo(model, optimizer, 0, fraction, 1024))
         assert optimizer.param_groups[0]["lr"] == pytest.approx(5e-4 * factor)
 
 

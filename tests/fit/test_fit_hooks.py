@@ -2,6 +2,7 @@
 functions; every model's density() and colour(); loss terms fed rays from cameras with no photo."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -166,7 +167,7 @@ def test_the_fast_schedule_grows_the_grid_at_the_growth_points():
     for step in range(100):
         shape = model.grid_shape
         for hook in schedule:
-            hook.before_step(StepInfo(model, optimizer, step, step / 100))
+            hook.before_step(StepInfo(model, optimizer, step, step / 100, 4096))
         if model.grid_shape != shape:
             grown.append((step, model.grid_shape))
     assert grown == [(10, former[1]), (20, former[2]), (30, former[3])]
@@ -184,9 +185,51 @@ def test_occupancy_refreshes_on_its_cadence_and_after_growth(monkeypatch):
     monkeypatch.setattr(model, "refresh_occupancy", lambda: refreshed.append(step))
     for step in range(12):
         for hook in schedule:
-            hook.before_step(StepInfo(model, optimizer, step, step / 12))
+            hook.before_step(StepInfo(model, optimizer, step, step / 12, 4096))
     # grows at steps 3 (before the warm-up: no refresh) and 5 (refresh), then every 3 steps
     assert refreshed == [5, 6, 9]
+
+
+def test_a_time_budget_caps_the_final_grid_at_the_rays_its_steps_will_bring():
+    model = fast_model(voxels=32**3, growth=(0.1, 0.2, 0.3), start_fraction=0.125,
+                       rays_per_voxel=4.0, occupancy_warmup=10**9)
+    optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    schedule = schedule_for(model)
+    # each step takes 1% of the budget, then 2% once the grid first grows, then 1% again
+    caps, sizes = {}, [math.prod(model.grid_shape)]
+    for step in range(85):
+        hundredths = step if step <= 10 else 10 + 2 * (step - 10) if step <= 15 else step + 5
+        fraction = hundredths / 100
+        for hook in schedule:
+            hook.before_step(StepInfo(model, optimizer, step, fraction, 512))
+        caps.setdefault(model.voxels, step)
+        sizes.append(math.prod(model.grid_shape))
+    # at 10% (step 10): 100 steps expected, 512 rays each, 4 a voxel; at 20% (step 15): the
+    # rate halved, 15 + 50 * 0.8 = 55 steps expected; at 30% (step 25) 25 + 100 * 0.7 = 95
+    assert caps == {32**3: 0, 100 * 128: 10, 55 * 128: 15, 95 * 128: 25}
+    assert model.grid_shape == model.lattice(1.0) == lattice_shape(torch.tensor([2.0] * 3), 95 * 128)
+    assert sizes == sorted(sizes)  # a lowered cap never shrinks the grids
+
+
+def test_a_step_budget_caps_the_final_grid_at_its_rays_and_the_cap_is_saved():
+    model = fast_model(voxels=32**3, growth=(0.5,), start_fraction=0.125, rays_per_voxel=4.0)
+    optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    schedule = schedule_for(model)
+    for step in range(60):
+        for hook in schedule:
+            hook.before_step(StepInfo(model, optimizer, step, step / 60, 1024))
+    assert model.voxels == 60 * 256
+    fresh = fast_model(voxels=32**3, growth=(0.5,), start_fraction=0.125)
+    fresh.load_state_dict(model.state_dict())
+    assert fresh.voxels == 60 * 256 and fresh.lattice(1.0) == model.grid_shape
+    unlimited = {k: v for k, v in model.state_dict().items() if not k.endswith("_extra_state")}
+    older = fast_model(voxels=32**3, growth=(0.5,), start_fraction=0.125)
+    older.load_state_dict(unlimited)  # checkpoints from before the cap: the config's count
+    assert older.voxels == 32**3
 
 
 def test_a_checkpoint_from_before_the_grid_rename_loads():

@@ -275,6 +275,18 @@ class FastModel(RadianceModel):
         """The lattice of `share` of the final voxel count over the object's box."""
         return lattice_shape(self.extent, round(self.voxels * share))
 
+    def limit_voxels(self, voxels: int) -> None:
+        """Make the final voxel count the smaller of `voxels` (at least MIN_VOXELS) and the count
+        the model was built with; the grids grow to the new lattices from the next growth point
+        on. Density keeps its units (per voxel of the built count), so the grids mean the same."""
+        self.voxels = min(self.config.voxels or DEFAULT_VOXELS, max(voxels, MIN_VOXELS))
+
+    def get_extra_state(self) -> dict:
+        return {"voxels": self.voxels}  # the final count, once limit_voxels lowered it
+
+    def set_extra_state(self, state: dict) -> None:
+        self.voxels = int(state["voxels"])
+
     @torch.no_grad()
     def grow(self, shape: tuple[int, int, int]) -> None:
         """Resample both grids, and their Adam moments, to `shape`; every cell of the new lattice
@@ -321,4 +333,5 @@ class FastModel(RadianceModel):
         for old, new in (("density.", "density_grid."), ("features.", "feature_grid.")):
             for key in [k for k in state_dict if k.startswith(prefix + old)]:
                 state_dict[prefix + new + key[len(prefix + old):]] = state_dict.pop(key)
+        state_dict.setdefault(prefix + "_extra_state", self.get_extra_state())  # older: no limit
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)

@@ -8,6 +8,7 @@ the primitive operations (the fast model's `grow(shape)` and `refresh_occupancy(
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -24,6 +25,7 @@ class StepInfo:
     optimizer: torch.optim.Optimizer
     step: int  # steps taken before this one
     fraction: float  # of the budget used, in [0, inf)
+    rays: int  # in each step's batch
 
 
 class Hook:
@@ -64,15 +66,37 @@ def grid_fraction(fraction: float, growth: tuple[float, ...], start: float) -> f
 
 @dataclass
 class GridGrowth(Hook):
-    """Grow the model's grids (`model.lattice(share)`, `model.grow(shape)`) at each growth point."""
+    """Grow the model's grids (`model.lattice(share)`, `model.grow(shape)`) at each growth point.
+
+    With `rays_per_voxel`, each growth point first caps the final voxel count
+    (`model.limit_voxels`) at the rays the run will train on over `rays_per_voxel`: the steps
+    taken plus those left at the rate since the previous growth point (the latest estimate wins:
+    the first steps, before empty space is skipped, are slow). A time budget on a slow device gets
+    a coarser grid; a step budget knows its rays exactly."""
 
     growth: tuple[float, ...]
     start: float
+    rays_per_voxel: float = 0.0
+    passed: int | None = None  # growth points passed at the last call (None: no call yet)
+    mark: tuple[int, float] = (0, 0.0)  # step and fraction when that count last changed
 
     def before_step(self, info: StepInfo) -> None:
+        passed = sum(info.fraction >= p for p in self.growth)
+        if self.passed is not None and passed > self.passed and self.rays_per_voxel > 0:
+            info.model.limit_voxels(round(self.expected_steps(info) * info.rays / self.rays_per_voxel))
+        if passed != self.passed:
+            self.passed, self.mark = passed, (info.step, info.fraction)
         shape = info.model.lattice(grid_fraction(info.fraction, self.growth, self.start))
-        if shape != info.model.grid_shape:
+        if math.prod(shape) > math.prod(info.model.grid_shape):  # a lowered cap never shrinks it
             info.model.grow(shape)
+
+    def expected_steps(self, info: StepInfo) -> float:
+        """Steps the run will have taken at the end of its budget, at the rate since `mark`."""
+        step, fraction = self.mark
+        if info.fraction <= fraction:
+            return float(info.step)
+        rate = (info.step - step) / (info.fraction - fraction)
+        return info.step + rate * max(1.0 - info.fraction, 0.0)
 
 
 @dataclass
@@ -101,7 +125,7 @@ def fast_schedule(model: RadianceModel) -> list[Hook]:
     occupancy grid refreshed (order matters: a refresh follows the growth of the same step)."""
     config = model.config
     return [LearningRate(exponential(config.lr_final)),
-            GridGrowth(config.growth, config.start_fraction),
+            GridGrowth(config.growth, config.start_fraction, config.rays_per_voxel),
             OccupancyRefresh(config.occupancy_warmup, config.occupancy_every, model.grid_shape)]
 
 

@@ -217,11 +217,11 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     model's own `batch_rays`) over the scene's `background` kind; advances `run.progress` and
     returns the step's log record."""
     model, optimizer, config, progress = run.model, run.optimizer, run.config, run.progress
-    info = StepInfo(model, optimizer, progress.step, progress.fraction(config))
+    rays = config.batch_rays or model.batch_rays
+    info = StepInfo(model, optimizer, progress.step, progress.fraction(config), rays)
     start = time.perf_counter()
     for hook in run.schedule:
         hook.before_step(info)
-    rays = config.batch_rays or model.batch_rays
     batch = bank.sample(rays)
     bg = _backgrounds(background, rays, bank.device)
     optimizer.zero_grad(set_to_none=True)

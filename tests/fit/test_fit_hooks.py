@@ -93,6 +93,14 @@ def fast_model(**overrides) -> FastModel:
     return FastModel(FastConfig(**{"voxels": 12**3, "growth": (), **overrides}), BOUNDS)
 
 
+def scheduled(model: FastModel) -> tuple[torch.optim.Optimizer, list]:
+    """The model's optimizer, its rates recorded as the trainer does, and its schedule's hooks."""
+    optimizer = model.make_optimizer()
+    for group in optimizer.param_groups:
+        group["initial_lr"] = group["lr"]
+    return optimizer, schedule_for(model)
+
+
 def test_fast_density_and_colour_at_a_vertex_read_that_vertex():
     torch.manual_seed(0)
     model = fast_model()
@@ -155,10 +163,7 @@ def test_losses_are_the_former_formulas():
 
 def test_the_fast_schedule_grows_the_grid_at_the_growth_points():
     model = fast_model(growth=(0.1, 0.2, 0.3), start_fraction=0.125, occupancy_warmup=10**9)
-    optimizer = model.make_optimizer()
-    for group in optimizer.param_groups:
-        group["initial_lr"] = group["lr"]
-    schedule = schedule_for(model)
+    optimizer, schedule = scheduled(model)
     extent = torch.tensor([2.0, 2.0, 2.0])
     # the lattice before the refactor: voxels * start ** (1 - passed / len(growth))
     former = [lattice_shape(extent, round(12**3 * 0.125 ** (1 - k / 3))) for k in range(4)]
@@ -177,11 +182,8 @@ def test_the_fast_schedule_grows_the_grid_at_the_growth_points():
 
 def test_occupancy_refreshes_on_its_cadence_and_after_growth(monkeypatch):
     model = fast_model(growth=(0.25, 0.4), occupancy_warmup=4, occupancy_every=3)
-    optimizer = model.make_optimizer()
-    for group in optimizer.param_groups:
-        group["initial_lr"] = group["lr"]
+    optimizer, schedule = scheduled(model)
     refreshed = []
-    schedule = schedule_for(model)
     monkeypatch.setattr(model, "refresh_occupancy", lambda: refreshed.append(step))
     for step in range(12):
         for hook in schedule:
@@ -193,10 +195,7 @@ def test_occupancy_refreshes_on_its_cadence_and_after_growth(monkeypatch):
 def test_a_time_budget_caps_the_final_grid_at_the_rays_its_steps_will_bring():
     model = fast_model(voxels=32**3, growth=(0.1, 0.2, 0.3), start_fraction=0.125,
                        rays_per_voxel=4.0, occupancy_warmup=10**9)
-    optimizer = model.make_optimizer()
-    for group in optimizer.param_groups:
-        group["initial_lr"] = group["lr"]
-    schedule = schedule_for(model)
+    optimizer, schedule = scheduled(model)
     # each step takes 1% of the budget, then 2% once the grid first grows, then 1% again
     caps, sizes = {}, [math.prod(model.grid_shape)]
     for step in range(85):
@@ -215,10 +214,7 @@ def test_a_time_budget_caps_the_final_grid_at_the_rays_its_steps_will_bring():
 
 def test_a_step_budget_caps_the_final_grid_at_its_rays_and_the_cap_is_saved():
     model = fast_model(voxels=32**3, growth=(0.5,), start_fraction=0.125, rays_per_voxel=4.0)
-    optimizer = model.make_optimizer()
-    for group in optimizer.param_groups:
-        group["initial_lr"] = group["lr"]
-    schedule = schedule_for(model)
+    optimizer, schedule = scheduled(model)
     for step in range(60):
         for hook in schedule:
             hook.before_step(StepInfo(model, optimizer, step, step / 60, 1024))

@@ -138,7 +138,7 @@ def race(scene, seconds: float, args, device: torch.device, nerf: bool = True,
     start = time.perf_counter()
     full = evaluate_views(model, held_out_views(scene), scene.background)
     fast.update(psnr=round(full["psnr"], 3), ssim=round(full["ssim"], 4),
-                eval_seconds=round(time.perf_counter() - start, 2), voxels=model.config.voxels,
+                eval_seconds=round(time.perf_counter() - start, 2), voxels=model.voxels,
                 grid=list(model.grid_shape))
     row = {"train_views": len(scene.split("train")), "test_views": full["test_views"],
            "seconds": seconds, "fast": fast}

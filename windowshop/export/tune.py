@@ -79,6 +79,9 @@ def row_crossings(xy: torch.Tensor, edges: torch.Tensor, covered: torch.Tensor
     h, w = covered.shape
     rows, cols = (covered[:, :-1] != covered[:, 1:]).nonzero(as_tuple=True)
     pair_key = rows * w + cols  # the pair (rows, cols) - (rows, cols + 1)
+    if len(pair_key) == 0:  # no covered pixel beside an uncovered one: no outline to cross
+        empty = torch.zeros(0, dtype=torch.int64, device=xy.device)
+        return empty, empty, xy[:0, 0]
     a, b = xy[edges[:, 0]], xy[edges[:, 1]]
     lo, hi = torch.minimum(a[:, 1], b[:, 1]).detach(), torch.maximum(a[:, 1], b[:, 1]).detach()
     first = torch.ceil(lo - 0.5).clamp(min=0).long()
@@ -91,9 +94,6 @@ def row_crossings(xy: torch.Tensor, edges: torch.Tensor, covered: torch.Tensor
     x = a[:, 0] + (row.to(xy) + 0.5 - a[:, 1]) / (b[:, 1] - a[:, 1]) * (b[:, 0] - a[:, 0])
     col = torch.floor(x.detach() - 0.5).long()  # the crossing lies between centres col, col + 1
     key = row * w + col
-    if len(pair_key) == 0:
-        empty = torch.zeros(0, dtype=torch.int64, device=xy.device)
-        return empty, empty, x[:0]
     order = torch.argsort(pair_key)
     position = torch.searchsorted(pair_key[order], key).clamp(max=len(order) - 1)
     hit = (col >= 0) & (col < w - 1) & (pair_key[order][position] == key)

@@ -43,8 +43,8 @@ from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
 from windowshop.fit.losses import loss_terms
-from windowshop.fit.trainer import (Progress, TrainingRun, carve_to_scene, train_step, training_pixels,
-                                    virtual_sampler)
+from windowshop.fit.trainer import (Progress, TrainingRun, capped_by_passes, carve_to_scene, train_step,
+                                    training_pixels, virtual_sampler)
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -85,8 +85,8 @@ class Probe:
 
 def start_run(scene, name: str, config, seconds: float, device: torch.device):
     """A fresh `name` model on `scene` in training mode, as `windowshop fit` builds it (seed 0, the
-    model's batch size), with a budget of `seconds`: its TrainingRun, the training PixelBank and
-    the background kind its rays are drawn over."""
+    model's batch size), with a budget of `seconds` (and fit's cap on passes over the pixels): its
+    TrainingRun, the training PixelBank and the background kind its rays are drawn over."""
     torch.manual_seed(0)
     config = model_class(name).for_scene(config, scene)
     model = model_class(name)(config, Bounds.of_scene(scene)).to(device)
@@ -96,10 +96,13 @@ def start_run(scene, name: str, config, seconds: float, device: torch.device):
         group["initial_lr"] = group["lr"]
     losses = loss_terms(config)
     virtual = virtual_sampler(losses, [v.camera for v in scene.split("train")], model.bounds, device, 0)
-    run = TrainingRun(model, optimizer, FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]),
-                      {}, Path(tempfile.gettempdir()), Progress(), losses=losses, virtual=virtual)
+    bank, background = training_pixels(scene, config, device)
+    budget = capped_by_passes(FitConfig(iters=None, seconds=seconds, batch_rays=BATCH[name]), model,
+                              len(bank))
+    run = TrainingRun(model, optimizer, budget, {}, Path(tempfile.gettempdir()), Progress(),
+                      losses=losses, virtual=virtual)
     model.train()
-    return run, *training_pixels(scene, config, device)
+    return run, bank, background
 
 
 def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[float],
@@ -189,11 +192,13 @@ def row_lego400(args, device):
 
 def row_fewer(args, device):
     """5, 10, 25 views with the defaults (the few-photo priors on at or under 20: lego's mattes
-    trained over random colours inside the visual hull, the distortion loss), then with the
-    priors off; the NeRF beside the defaults."""
+    trained over random colours inside the visual hull, the distortion loss, the features' total
+    variation, at most 50 passes over the pixels), then with the priors off; the NeRF beside the
+    defaults."""
     rows = []
     for priors in (True, False):
-        overrides = {} if priors else {"masked": False, "distortion": 0.0}
+        overrides = {} if priors else {"masked": False, "distortion": 0.0, "tv_features": 0.0,
+                                       "max_passes": 0.0}
         for views in (5, 10, 25):
             scene = lego(SceneOptions(downscale=4, views=views, test_views=25))
             row, _ = race(scene, args.seconds or 30.0, args, device, nerf=priors, **overrides)

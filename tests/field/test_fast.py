@@ -188,3 +188,43 @@ def test_density_dropout_only_trains_on_a_random_share_of_the_samples():
     model.eval()
     kept = model.render_rays(origins, directions, torch.ones(64, 3)).opacity
     torch.testing.assert_close(kept, kept[:1].expand(64))
+
+
+def ramp_in_fog(**overrides) -> FastModel:
+    """`uniform_fog` confined to the vertices 4..12 of its 17 a side (so every sample that shows
+    and its neighbours lie inside the lattice), with features that rise by 0.1 a vertex along
+    every axis: one voxel along any axis changes every channel by 0.1."""
+    model = uniform_fog(**overrides)
+    n = model.grid_shape[0]
+    index = torch.arange(n, dtype=torch.float32)
+    i, j, k = torch.meshgrid(index, index, index, indexing="ij")
+    inside = ((i >= 4) & (i <= 12) & (j >= 4) & (j <= 12) & (k >= 4) & (k <= 12)).reshape(-1)
+    with torch.no_grad():
+        model.density_grid.values[~inside] = model._raw_at_alpha(1e-9)
+        model.feature_grid.values.copy_((0.1 * (i + j + k)).reshape(-1, 1).expand(-1, 16))
+    return model
+
+
+def test_the_feature_total_variation_is_the_squared_change_one_voxel_away():
+    model = ramp_in_fog(tv_features=1.0)
+    assert model.grid_shape == (17, 17, 17)
+    origins = torch.tensor([[-3.0, 0.05, -0.1]]).expand(256, 3)
+    directions = torch.tensor([[1.0, 0.0, 0.0]]).expand(256, 3)
+    tv = model.render_rays(origins, directions, torch.ones(256, 3)).aux["tv_features"]
+    torch.testing.assert_close(float(tv), 0.1**2, rtol=1e-4, atol=0)
+
+
+def test_the_feature_total_variation_leaves_the_colours_alone_and_trains_the_features():
+    origins = torch.tensor([[-3.0, 0.05, -0.1]]).expand(256, 3)
+    directions = torch.tensor([[1.0, 0.0, 0.0]]).expand(256, 3)
+    colours = []
+    for weight in (0.0, 1.0):
+        torch.manual_seed(0)  # the same colour MLP, and the same jitter
+        model = ramp_in_fog(tv_features=weight)
+        out = model.render_rays(origins, directions, torch.ones(256, 3))
+        colours.append(out.rgb.detach())
+    torch.testing.assert_close(colours[0], colours[1])
+    # the term's gradient reaches the features, not the density
+    out.aux["tv_features"].backward()
+    assert float(model.feature_grid.values.grad.coalesce().values().abs().sum()) > 0
+    assert float(model.density_grid.values.grad.coalesce().values().abs().sum()) == 0

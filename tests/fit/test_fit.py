@@ -13,7 +13,8 @@ from windowshop.field.fast import FastModel, with_priors
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.checkpoint import load_checkpoint, load_run
 from windowshop.fit.evaluate import comparison_image, evaluate_run, mean_color_psnr
-from windowshop.fit.trainer import Progress, fit, masked_training, training_pixels
+from windowshop.fit.trainer import Progress, capped_by_passes, fit, masked_training, training_pixels
+from windowshop.model import Bounds
 from windowshop.rays import camera_rays
 from windowshop.render.frames import render_camera
 from windowshop.scene.types import Camera, Scene, View
@@ -95,11 +96,31 @@ def test_masked_training_of_mattes_over_white_only_when_the_model_asks():
 
 def test_few_photo_priors_switch_on_at_or_under_few_views():
     few, many = with_priors(FastConfig(), 20), with_priors(FastConfig(), 21)
-    assert (few.distortion, few.masked) == (0.01, True)
-    assert (many.distortion, many.masked) == (0.0, False)
+    assert (few.distortion, few.tv_features, few.max_passes, few.masked) == (0.01, 0.003, 50, True)
+    assert (many.distortion, many.tv_features, many.max_passes, many.masked) == (0, 0, 0, False)
     assert with_priors(FastConfig(distortion=0.5, masked=False), 8).distortion == 0.5
     assert not with_priors(FastConfig(distortion=0.5, masked=False), 8).masked
     assert with_priors(FastConfig(), None).distortion == 0.0  # a model built without a scene
+
+
+def test_few_photos_stop_after_their_passes_over_the_pixels():
+    model = FastModel(FastConfig(voxels=8**3, max_passes=2.5), Bounds.of_scene(toy_scene()))
+    by_time = FitConfig(iters=None, seconds=60, batch_rays=100)
+    assert capped_by_passes(by_time, model, 1000).iters == 25  # 2.5 * 1000 pixels / 100 a step
+    assert capped_by_passes(FitConfig(iters=20, batch_rays=100), model, 1000).iters == 20
+    assert capped_by_passes(FitConfig(iters=30, batch_rays=100), model, 1000).iters == 25
+    model.config = dataclasses.replace(model.config, max_passes=0.0)
+    assert capped_by_passes(by_time, model, 1000) == by_time
+
+
+def test_a_fit_on_few_photos_stops_after_its_passes(tmp_path):
+    scene = toy_scene()
+    pixels = sum(v.camera.width * v.camera.height for v in scene.split("train"))
+    metrics = fit(scene, "fast", FastConfig(voxels=8**3, max_passes=1.0),
+                  FitConfig(iters=None, seconds=600, batch_rays=64), tmp_path, "cpu",
+                  show_progress=False)
+    assert metrics["iterations"] == -(-pixels // 64) and metrics["stopped_by_passes"]
+    assert json.loads((tmp_path / "config.json").read_text())["fit_config"]["iters"] == -(-pixels // 64)
 
 
 def test_progress_follows_steps_or_seconds():
@@ -179,7 +200,6 @@ def test_final_checkpoint_without_the_optimizer_still_renders_and_resumes(tmp_pa
 def test_chunked_rendering_matches_one_pass():
     torch.manual_seed(0)
     from windowshop.field.nerf import NerfModel
-    from windowshop.model import Bounds
 
     model = NerfModel(TINY, Bounds.of_scene(toy_scene()))
     camera = toy_scene().views[0].camera
@@ -246,7 +266,6 @@ def test_a_batch_over_the_memory_budget_gets_the_gradient_of_one_pass():
     from windowshop.field.nerf import NerfModel
     from windowshop.fit.losses import loss_terms
     from windowshop.fit.trainer import _backward_in_chunks
-    from windowshop.model import Bounds
 
     torch.manual_seed(0)
     model = NerfModel(TINY, Bounds.of_scene(toy_scene())).eval()  # eval: no jitter, same samples

@@ -58,4 +58,7 @@ def summary(metrics: dict) -> str:
         return "n/a" if value is None else format(value, spec)
     return (f"{metrics['model']}: PSNR {fmt(metrics['psnr'], '.2f')} dB, SSIM {fmt(metrics['ssim'], '.3f')} "
             f"on {metrics['test_views']} held-out views after {metrics['iterations']} steps "
-            f"({metrics['train_seconds']:.0f} s)")
+            f"({metrics['train_seconds']:.0f} s{PASSES_NOTE if metrics.get('stopped_by_passes') else ''})")
+
+
+PASSES_NOTE = "; stopped early: more passes over so few pixels would only overfit them"

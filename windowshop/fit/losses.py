@@ -73,6 +73,11 @@ def tv_density(inp: LossInput) -> torch.Tensor:
     return inp.out.aux["tv_density"]
 
 
+def tv_features(inp: LossInput) -> torch.Tensor:
+    """Total variation of the features at the samples that show, aux["tv_features"] (a scalar)."""
+    return inp.out.aux["tv_features"]
+
+
 def occlusion(inp: LossInput) -> torch.Tensor:
     """FreeNeRF's occlusion penalty: density near where the rays enter the box, aux["occlusion"]."""
     return inp.out.aux["occlusion"]
@@ -108,6 +113,7 @@ def virtual_entropy(inp: LossInput) -> torch.Tensor:
 REGULARISERS: dict[str, Callable[[LossInput], torch.Tensor]] = {
     "distortion": distortion,
     "tv_density": tv_density,
+    "tv_features": tv_features,
     "occlusion": occlusion,
     "depth_smoothness": depth_smoothness,
     "virtual_entropy": virtual_entropy,

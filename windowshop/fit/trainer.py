@@ -18,7 +18,7 @@ import logging
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -125,10 +125,11 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     losses = loss_terms(model_config, extra_losses)
     virtual = virtual_sampler(losses, [v.camera for v in train_views], model.bounds, device,
                               fit_config.seed + progress.step, virtual_cameras)
-    run = TrainingRun(model, optimizer, fit_config, record, out_dir, progress, callbacks,
-                      losses=losses, virtual=virtual)
-    write_config(out_dir, model_name, model_config, fit_config, run.record)
     bank, background = training_pixels(scene, model_config, device)
+    budget = capped_by_passes(fit_config, model, len(bank))
+    run = TrainingRun(model, optimizer, budget, record, out_dir, progress, callbacks,
+                      losses=losses, virtual=virtual)
+    write_config(out_dir, model_name, model_config, budget, run.record)
     try:
         _train(run, bank, background, show_progress)
     except FitCancelled:
@@ -141,7 +142,8 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     results = evaluate_views(model, held_out_views(scene), scene.background,
                              fit_config.memory_budget, out_dir / EVAL_DIR)
     metrics = {**results, "model": model_name, "train_seconds": progress.elapsed,
-               "iterations": progress.step}
+               "iterations": progress.step,
+               "stopped_by_passes": budget.iters != fit_config.iters and progress.step >= budget.iters}
     write_metrics(out_dir, metrics)
     return metrics
 
@@ -157,6 +159,21 @@ def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: st
     else:
         log.info("%s was saved without its optimizer state: Adam starts afresh", run_dir)
     return Progress(step=int(state["step"]), elapsed=float(state["elapsed_seconds"]))
+
+
+def capped_by_passes(config: FitConfig, model: RadianceModel, pixels: int) -> FitConfig:
+    """`config` with its steps capped at the model's `max_passes` (if it has one) over the
+    `pixels` training pixels: a fit on few small photos learns no more after that many passes,
+    it only fits the photos closer (bench/RESULTS.md). The schedule follows the capped budget."""
+    passes = getattr(model.config, "max_passes", 0) or 0
+    if passes <= 0:
+        return config
+    cap = math.ceil(passes * pixels / (config.batch_rays or model.batch_rays))
+    if config.iters and config.iters <= cap:
+        return config
+    log.info("stopping after %d steps at the latest: %g passes over %d training pixels",
+             cap, passes, pixels)
+    return replace(config, iters=cap)
 
 
 def masked_training(scene: Scene, model_config: Any) -> bool:

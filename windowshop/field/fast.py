@@ -33,7 +33,7 @@ from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
 EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
-TV_RAYS = 2  # training rays per probe pair of the features' total variation (1: no better, 5% slower)
+TV_RAYS = 8  # training rays per probe pair of the features' total variation (2 or 4: no better)
 CARVE_VOXELS = 96**3  # the finest carve mask (FastModel.carve_cells)
 # bytes one marched sample takes (t, weight, ray index, its density and feature reads), and while
 # training with its gradients: lego_tiny's final grid with every cell occupied peaked at 96 and 220

@@ -217,7 +217,8 @@ class FastModel(RadianceModel):
         n_rays = origins.shape[0]
         pick = torch.randint(len(t), (max(1, n_rays // TV_RAYS),), device=t.device)
         at = ray.index_select(0, pick)
-        points = origins.index_select(0, at) + t.index_select(0, pick)[:, None] * directions.index_select(0, at)
+        points = (origins.index_select(0, at)
+                  + t.index_select(0, pick)[:, None] * directions.index_select(0, at))
         # one neighbour per point, along a random axis: the same expected variation as all three
         axis = torch.randint(3, (len(pick),), device=t.device)
         points = torch.cat([points, points + torch.diag(self.feature_grid.voxel).index_select(0, axis)])
@@ -227,7 +228,6 @@ class FastModel(RadianceModel):
                 torch.cat([t, torch.zeros_like(ones)]), torch.cat([weights, ones]),
                 torch.cat([ray, torch.arange(n_rays, n_rays + n, device=t.device)]),
                 torch.cat([counts, torch.ones_like(counts[:1]).expand(n)]))
-        return features, opacity, depth, count
 
     def _march_and_weigh(self, origins: torch.Tensor, directions: torch.Tensor, aux: dict):
         """Every occupied sample (jittered when training) and its compositing weight.

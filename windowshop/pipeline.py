@@ -189,6 +189,9 @@ def _prepare_report(scene_dir: Path, source: Path) -> dict | None:
 
 def check_output(out: Path, background: str) -> None:
     """Refuse, before any work, a video file that cannot hold what was asked."""
+    from windowshop.video.turntable import check_video_name
+
+    check_video_name(out)
     if (background == "transparent") != (out.suffix.lower() == ".webm"):
         raise UserError(f"{out}: a transparent turntable is written as .webm (VP9 with alpha), "
                         f"any other as .mp4; name the output accordingly")

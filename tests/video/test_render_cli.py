@@ -162,6 +162,8 @@ def test_render_cli_transparent_writes_a_webm_and_pngs_with_alpha(run_dir, tmp_p
     code = main(["render", str(run_dir), "--out", str(tmp_path / "t.mp4"), "--background",
                  "transparent", "--device", "cpu"])
     assert code == 2 and "webm" in capsys.readouterr().err and not (tmp_path / "t.mp4").exists()
+    code = main(["render", str(run_dir), "--out", str(tmp_path / "t"), "--device", "cpu"])
+    assert code == 2 and "name the video .mp4" in capsys.readouterr().err and not (tmp_path / "t").exists()
 
 
 def test_render_cli_follows_a_camera_path_file(run_dir, tmp_path):

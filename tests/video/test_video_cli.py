@@ -89,6 +89,13 @@ def test_cli_video_prints_each_stage(posed, tmp_path, capsys):
     assert Image.open(truth).height == 16  # truth | render | error side by side, 16 px high
 
 
+def test_an_output_named_without_a_video_suffix_is_refused_before_any_work(posed, tmp_path, capsys):
+    for name in ("spin", "spin.avi"):
+        code = main(["video", str(posed), "--out", str(tmp_path / name), "--iters", "3"])
+        assert code == 2 and "name the video .mp4" in capsys.readouterr().err
+        assert not (tmp_path / f"{name.split('.')[0]}_work").exists()  # nothing prepared or fitted
+
+
 def test_a_foreign_work_folder_is_never_emptied(posed, tmp_path):
     work = tmp_path / "work"
     work.mkdir()

@@ -143,6 +143,16 @@ def run_plan(run, options: VideoOptions) -> TurntablePlan:
     return plan_turntable(run.train_cameras, options, run.bounds, up)
 
 
+VIDEO_SUFFIXES = (".mp4", ".webm")
+
+
+def check_video_name(out: Path) -> None:
+    """Refuse, before any work, a video file whose name gives no format the encoder writes."""
+    if out.suffix.lower() not in VIDEO_SUFFIXES:
+        raise UserError(f"{out}: name the video .mp4 (H.264, plays everywhere) or .webm (VP9, "
+                        f"keeps transparency), e.g. --out spin.mp4")
+
+
 def default_outputs(out: str | Path, gif: bool | str = False, webp: bool | str = False,
                     depth: bool | str = False, poster: bool | str = False,
                     frames_dir: str | Path | None = None, frames_format: str = "png",
@@ -151,6 +161,7 @@ def default_outputs(out: str | Path, gif: bool | str = False, webp: bool | str =
     frames' alpha): True names a file after it (spin.gif, spin_depth.mp4, spin_poster.jpg, or
     spin_poster.png when transparent), a string is used as the file's path."""
     out = Path(out)
+    check_video_name(out)
 
     def pick(flag: bool | str, name: str) -> Path | None:
         return None if not flag else Path(flag) if isinstance(flag, str) else out.with_name(name)

@@ -28,7 +28,7 @@ from windowshop.field import kernels
 from windowshop.field.occupancy import OccupancyGrid, ray_box
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
-from windowshop.render.packed import packed_distortion, packed_weights, ray_sum
+from windowshop.render.packed import packed_distortion, packed_weights, ray_sum, sample_points
 
 EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
@@ -216,9 +216,7 @@ class FastModel(RadianceModel):
         reads.)"""
         n_rays = origins.shape[0]
         pick = torch.randint(len(t), (max(1, n_rays // TV_RAYS),), device=t.device)
-        at = ray.index_select(0, pick)
-        points = (origins.index_select(0, at)
-                  + t.index_select(0, pick)[:, None] * directions.index_select(0, at))
+        points = sample_points(origins, directions, t.index_select(0, pick), ray.index_select(0, pick))
         # one neighbour per point, along a random axis: the same expected variation as all three
         axis = torch.randint(3, (len(pick),), device=t.device)
         points = torch.cat([points, points + torch.diag(self.feature_grid.voxel).index_select(0, axis)])
@@ -267,7 +265,7 @@ class FastModel(RadianceModel):
     def _density_with_tv(self, origins, directions, t, ray) -> tuple[torch.Tensor, torch.Tensor]:
         """Raw density (S,) at the samples and its total variation: the mean squared change one
         voxel away along each axis from every sample (one grid read, so one sparse gradient)."""
-        points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
+        points = sample_points(origins, directions, t, ray)
         steps = torch.diag(self.density_grid.voxel)  # (3, 3)
         neighbours = (points[None] + steps[:, None, :]).reshape(-1, 3)
         raw = self.density_grid(torch.cat([points, neighbours]))[:, 0]

@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from windowshop.field import kernels
-from windowshop.render.packed import ray_sum
+from windowshop.render.packed import ray_sum, sample_points
 
 
 def corner_weights(points: torch.Tensor, shape: tuple[int, int, int]
@@ -159,7 +159,7 @@ class DenseGrid(nn.Module):
         if self._fused_for(origins):
             return _FusedAlongRays.apply(self.values, self, origins.contiguous(),
                                          directions.contiguous(), t.contiguous(), ray.contiguous())
-        points = origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
+        points = sample_points(origins, directions, t, ray)
         return trilinear_reference(self.values, self.shape, self.to_grid(points))
 
     def composite(self, origins: torch.Tensor, directions: torch.Tensor, t: torch.Tensor,

@@ -52,6 +52,9 @@ def eval_command(run_dir: str, device: torch.device) -> dict:
     return evaluate_run(run_dir, device)
 
 
+PASSES_NOTE = "; stopped early: more passes over so few pixels would only overfit them"
+
+
 def summary(metrics: dict) -> str:
     """One line for the terminal."""
     def fmt(value, spec):
@@ -59,6 +62,3 @@ def summary(metrics: dict) -> str:
     return (f"{metrics['model']}: PSNR {fmt(metrics['psnr'], '.2f')} dB, SSIM {fmt(metrics['ssim'], '.3f')} "
             f"on {metrics['test_views']} held-out views after {metrics['iterations']} steps "
             f"({metrics['train_seconds']:.0f} s{PASSES_NOTE if metrics.get('stopped_by_passes') else ''})")
-
-
-PASSES_NOTE = "; stopped early: more passes over so few pixels would only overfit them"

@@ -42,6 +42,12 @@ def packed_weights(sigma: torch.Tensor, dt: torch.Tensor | float, ray: torch.Ten
     return torch.exp(-before).to(sigma.dtype) * (1.0 - torch.exp(-optical))
 
 
+def sample_points(origins: torch.Tensor, directions: torch.Tensor, t: torch.Tensor,
+                  ray: torch.Tensor) -> torch.Tensor:
+    """World points (S, 3) of packed samples: origins[ray] + t * directions[ray]."""
+    return origins.index_select(0, ray) + t[:, None] * directions.index_select(0, ray)
+
+
 def ray_sum(values: torch.Tensor, ray: torch.Tensor, n_rays: int) -> torch.Tensor:
     """Per-ray sums (R, ...) of per-sample `values` (S, ...) whose rays are `ray` (S,)."""
     out = torch.zeros((n_rays, *values.shape[1:]), dtype=values.dtype, device=values.device)

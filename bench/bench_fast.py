@@ -191,10 +191,10 @@ def row_lego400(args, device):
 
 
 def row_fewer(args, device):
-    """5, 10, 25 views with the defaults (the few-photo priors on at or under 20: lego's mattes
-    trained over random colours inside the visual hull, the distortion loss, the features' total
-    variation, at most 50 passes over the pixels), then with the priors off; the NeRF beside the
-    defaults."""
+    """5, 10, 25 views with the defaults (lego's mattes trained over random colours inside the
+    visual hull, to the end at or under 20 photos and for half the budget above; the few-photo
+    priors on at or under 20: the distortion loss, the features' total variation, at most 50
+    passes over the pixels), then with all of them off; the NeRF beside the defaults."""
     rows = []
     for priors in (True, False):
         overrides = {} if priors else {"masked": False, "distortion": 0.0, "tv_features": 0.0,

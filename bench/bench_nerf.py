@@ -25,7 +25,7 @@ from windowshop.device import pick_device
 from windowshop.field.nerf import NerfModel
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.evaluate import held_out_views, mean_color_psnr
-from windowshop.fit.trainer import Progress, TrainingRun, fit, train_step
+from windowshop.fit.trainer import Progress, TrainingBackground, TrainingRun, fit, train_step
 from windowshop.model import Bounds
 from windowshop.scene import load_scene
 
@@ -47,7 +47,7 @@ def seconds_per_step(scene, preset: str, steps: int, device: torch.device) -> fl
     times = []
     for _ in range(steps + 1):
         start = time.perf_counter()
-        train_step(run, bank, scene.background)
+        train_step(run, bank, TrainingBackground(scene.background))
         times.append(time.perf_counter() - start)
     times = sorted(times[1:])
     return times[len(times) // 2]

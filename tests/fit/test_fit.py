@@ -13,7 +13,8 @@ from windowshop.field.fast import FastModel, with_priors
 from windowshop.fit.batches import PixelBank
 from windowshop.fit.checkpoint import load_checkpoint, load_run
 from windowshop.fit.evaluate import comparison_image, evaluate_run, mean_color_psnr
-from windowshop.fit.trainer import Progress, capped_by_passes, fit, masked_training, training_pixels
+from windowshop.fit.trainer import (Progress, TrainingBackground, capped_by_passes, fit, masked_training,
+                                    training_pixels)
 from windowshop.model import Bounds
 from windowshop.rays import camera_rays
 from windowshop.render.frames import render_camera
@@ -88,16 +89,30 @@ def test_masked_training_of_mattes_over_white_only_when_the_model_asks():
     assert masked_training(scene, few) and not masked_training(scene, many)
     assert not masked_training(scene, TINY)  # the NeRF has no such prior
     bank, background = training_pixels(scene, few, "cpu")
-    assert background == "alpha" and bank.alpha is not None and torch.equal(bank.over, torch.ones(3))
+    assert background == TrainingBackground("alpha", "white", 1.0)  # few photos: masked to the end
+    assert bank.alpha is not None and torch.equal(bank.over, torch.ones(3))
     bank, background = training_pixels(scene, many, "cpu")
-    assert background == "white" and bank.alpha is None
+    assert background == TrainingBackground("white") and bank.alpha is None
     assert not masked_training(toy_scene(), few)  # no mattes: nothing to mask with
+
+
+def test_masked_training_returns_to_the_scenes_own_colour_late_unless_it_has_none():
+    over_white = toy_scene(alpha=True)
+    config = dataclasses.replace(FastModel.for_scene(FastConfig(), over_white), masked_until=0.5)
+    _, background = training_pixels(over_white, config, "cpu")
+    assert [background.at(f) for f in (0.0, 0.49, 0.5, 1.0)] == ["alpha", "alpha", "white", "white"]
+    straight = toy_scene(alpha=True)
+    straight.background = "alpha"  # mattes with no colour of their own: random colours throughout
+    _, background = training_pixels(straight, config, "cpu")
+    assert [background.at(f) for f in (0.0, 0.5, 1.0)] == ["alpha"] * 3
+    assert TrainingBackground("white").at(0.9) == "white"
 
 
 def test_few_photo_priors_switch_on_at_or_under_few_views():
     few, many = with_priors(FastConfig(), 20), with_priors(FastConfig(), 21)
-    assert (few.distortion, few.tv_features, few.max_passes, few.masked) == (0.01, 0.003, 50, True)
-    assert (many.distortion, many.tv_features, many.max_passes, many.masked) == (0, 0, 0, False)
+    assert (few.distortion, few.tv_features, few.max_passes, few.masked_until) == (0.01, 0.003, 50, 1.0)
+    assert (many.distortion, many.tv_features, many.max_passes, many.masked_until) == (0, 0, 0, 0.5)
+    assert few.masked and many.masked  # mattes train over random colours at any count
     assert with_priors(FastConfig(distortion=0.5, masked=False), 8).distortion == 0.5
     assert not with_priors(FastConfig(distortion=0.5, masked=False), 8).masked
     assert with_priors(FastConfig(), None).distortion == 0.0  # a model built without a scene

@@ -79,9 +79,10 @@ def with_priors(config: FastConfig, photos: int | None) -> FastConfig:
     distortion = (0.01 if few else 0.0) if config.distortion is None else config.distortion
     tv_features = (0.003 if few else 0.0) if config.tv_features is None else config.tv_features
     max_passes = (50.0 if few else 0.0) if config.max_passes is None else config.max_passes
-    masked = few if config.masked is None else config.masked
+    masked = True if config.masked is None else config.masked
+    masked_until = (1.0 if few else 0.5) if config.masked_until is None else config.masked_until
     return replace(config, distortion=distortion, tv_features=tv_features, max_passes=max_passes,
-                   masked=masked)
+                   masked=masked, masked_until=masked_until)
 
 
 class FastModel(RadianceModel):

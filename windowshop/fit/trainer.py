@@ -2,7 +2,8 @@
 
 Each step runs the model's schedule hooks (learning rate, grid growth, ...: fit/schedule.py),
 draws `batch_rays` random rays across all training views, renders them over the scene's background
-(a random colour per ray for "alpha" scenes, the target composited over the same colour), steps
+(a random colour per ray for masked scenes, the target composited over the same colour; mattes
+over a known colour return to that colour late in the budget: TrainingBackground), steps
 the optimizer on the loss terms its config asks for (fit/losses.py), and logs loss, PSNR and
 throughput. A fresh model of a masked scene is first carved to the visual hull of the training
 masks (models with a `carve`, when their config asks). Progress is the larger of steps/iters and
@@ -186,13 +187,31 @@ def masked_training(scene: Scene, model_config: Any) -> bool:
             and all(v.alpha is not None for v in scene.split("train")))
 
 
-def training_pixels(scene: Scene, model_config: Any, device) -> tuple[PixelBank, str]:
-    """The training views' pixels and the background kind their rays are drawn over."""
+@dataclass(frozen=True)
+class TrainingBackground:
+    """What training rays are composited over: `kind` (a scene background, or "alpha": a random
+    colour per ray) until `until` of the budget, then `finish` (None: `kind` to the end)."""
+
+    kind: str
+    finish: str | None = None
+    until: float = 1.0
+
+    def at(self, fraction: float) -> str:
+        return self.finish if self.finish is not None and fraction >= self.until else self.kind
+
+
+def training_pixels(scene: Scene, model_config: Any, device) -> tuple[PixelBank, TrainingBackground]:
+    """The training views' pixels and the background their rays are drawn over: a masked scene's
+    random colours, which one composited over a known colour leaves for that colour after its
+    model's `masked_until` share of the budget."""
     views = scene.split("train")
     if not masked_training(scene, model_config):
-        return PixelBank(views, device), scene.background
+        return PixelBank(views, device), TrainingBackground(scene.background)
     over = BACKGROUNDS.get(scene.background)  # None: "alpha" scenes keep straight colour
-    return PixelBank(views, device, use_alpha=True, over=over), "alpha"
+    finish = scene.background if over is not None else None
+    until = getattr(model_config, "masked_until", None)
+    background = TrainingBackground("alpha", finish, 1.0 if until is None else until)
+    return PixelBank(views, device, use_alpha=True, over=over), background
 
 
 def carve_to_scene(model: RadianceModel, scene: Scene) -> None:
@@ -229,10 +248,10 @@ def _backgrounds(kind: str, rays: int, device: torch.device) -> torch.Tensor:
     return torch.tensor(BACKGROUNDS[kind], device=device).expand(rays, 3)
 
 
-def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
+def train_step(run: TrainingRun, bank: PixelBank, background: TrainingBackground) -> dict:
     """One optimisation step on a fresh random batch of `run.config.batch_rays` rays (None: the
-    model's own `batch_rays`) over the scene's `background` kind; advances `run.progress` and
-    returns the step's log record."""
+    model's own `batch_rays`) over `background` at this point of the budget; advances
+    `run.progress` and returns the step's log record."""
     model, optimizer, config, progress = run.model, run.optimizer, run.config, run.progress
     rays = config.batch_rays or model.batch_rays
     info = StepInfo(model, optimizer, progress.step, progress.fraction(config), rays)
@@ -240,7 +259,7 @@ def train_step(run: TrainingRun, bank: PixelBank, background: str) -> dict:
     for hook in run.schedule:
         hook.before_step(info)
     batch = bank.sample(rays)
-    bg = _backgrounds(background, rays, bank.device)
+    bg = _backgrounds(background.at(info.fraction), rays, bank.device)
     optimizer.zero_grad(set_to_none=True)
     loss, error, samples = _backward_in_chunks(run, batch.origins, batch.directions, bg, batch.target(bg))
     optimizer.step()
@@ -277,7 +296,8 @@ def _backward_in_chunks(run: TrainingRun, origins: torch.Tensor, directions: tor
     return loss_sum, squared / target.numel(), samples
 
 
-def _train(run: TrainingRun, bank: PixelBank, background: str, show_progress: bool) -> None:
+def _train(run: TrainingRun, bank: PixelBank, background: TrainingBackground,
+           show_progress: bool) -> None:
     """Step until the budget is spent or the callbacks ask to stop (`FitCancelled`), logging to
     log.jsonl, reporting each step and checkpointing now and then."""
     config, progress = run.config, run.progress

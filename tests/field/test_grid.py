@@ -147,3 +147,24 @@ def test_fused_ray_sample_kernels_equal_the_reference():
     assert fused.values.grad.is_sparse and not plain.values.grad.is_sparse
     for ours, ref in zip(*results):
         torch.testing.assert_close(ours, ref, rtol=1e-4, atol=1e-4)
+
+
+@needs_kernels
+@pytest.mark.parametrize("rows, channels", [(1_000_003, 1), (4_099, 16)])
+def test_harvest_gives_every_touched_row_in_order_and_clears_them(rows, channels):
+    """Touched rows in clumps and alone, at both ends and across the scan's word and span edges
+    (the row counts are neither multiples of 8 nor of the spans)."""
+    generator = torch.Generator().manual_seed(3)
+    touched = (torch.rand(rows, generator=generator) < 0.02).to(torch.uint8)
+    touched[:11] = 1
+    touched[rows // 2 - 9: rows // 2 + 30] = 1
+    touched[-3:] = 1
+    accum = torch.randn(rows, channels, generator=generator) * touched[:, None]
+    expected_rows = torch.nonzero(touched).flatten()
+    expected_values = accum[expected_rows].clone()
+    got_rows, got_values = kernels.harvest(accum, touched)
+    assert torch.equal(got_rows, expected_rows)
+    assert torch.equal(got_values, expected_values)
+    assert not touched.any() and not accum.any()
+    empty_rows, empty_values = kernels.harvest(accum, touched)  # nothing touched since
+    assert empty_rows.numel() == 0 and empty_values.shape == (0, channels)

@@ -122,22 +122,51 @@ void trilinear_backward(const float *points, i64 N, i64 X, i64 Y, i64 Z, i64 C,
     }
 }
 
-/* The touched rows in increasing order: writes them to rows and returns how many. */
-i64 touched_rows(const uint8_t *touched, i64 V, i64 *rows) {
-    i64 m = 0;
-    for (i64 r = 0; r < V; r++) {
-        if (touched[r]) rows[m++] = r;
+/* The touched rows of [lo, hi) in increasing order, written to rows unless it is NULL; returns
+ * how many. A step touches a few percent of a fine grid's rows, in clumps, so whole 8-byte words
+ * of flags (0 or 1 each) are counted at once and skipped when zero. */
+static i64 scan_span(const uint8_t *touched, i64 lo, i64 hi, i64 *rows) {
+    i64 m = 0, r = lo;
+    for (; r < hi && (r & 7); r++)
+        if (touched[r]) { if (rows) rows[m] = r; m++; }
+    for (; r + 8 <= hi; r += 8) {
+        uint64_t word;
+        memcpy(&word, touched + r, 8);
+        if (!word) continue;
+        if (!rows) { m += __builtin_popcountll(word); continue; }
+        for (i64 k = r; k < r + 8; k++)
+            if (touched[k]) rows[m++] = k;
     }
+    for (; r < hi; r++)
+        if (touched[r]) { if (rows) rows[m] = r; m++; }
     return m;
 }
 
-/* values (M, C) = accum[rows]; then those accum rows and touched flags are cleared. */
+/* The touched rows in increasing order: writes them to rows and returns how many. The flags are
+ * cut into spans that threads count, then fill from their offsets (a fine grid has millions). */
+i64 touched_rows(const uint8_t *touched, i64 V, i64 *rows) {
+    enum { SPANS = 64 };
+    i64 start[SPANS + 1] = {0};
+#pragma omp parallel for schedule(static)
+    for (int s = 0; s < SPANS; s++)
+        start[s + 1] = scan_span(touched, V * s / SPANS, V * (s + 1) / SPANS, NULL);
+    for (int s = 0; s < SPANS; s++) start[s + 1] += start[s];
+#pragma omp parallel for schedule(static)
+    for (int s = 0; s < SPANS; s++)
+        scan_span(touched, V * s / SPANS, V * (s + 1) / SPANS, rows + start[s]);
+    return start[SPANS];
+}
+
+/* values (M, C) = accum[rows]; then those accum rows and touched flags are cleared (plain loops:
+ * a row is 1-16 floats, too short for memcpy's call to pay). */
 void harvest_rows(float *accum, uint8_t *touched, i64 C, const i64 *rows, i64 M, float *values) {
 #pragma omp parallel for schedule(static)
     for (i64 i = 0; i < M; i++) {
-        float *a = accum + rows[i] * C;
-        memcpy(values + i * C, a, (size_t)C * sizeof(float));
-        memset(a, 0, (size_t)C * sizeof(float));
+        float *a = accum + rows[i] * C, *v = values + i * C;
+        for (i64 ch = 0; ch < C; ch++) {
+            v[ch] = a[ch];
+            a[ch] = 0.0f;
+        }
         touched[rows[i]] = 0;
     }
 }
@@ -228,8 +257,9 @@ void march_fill(const float *origins, const float *dirs, const float *t_min, con
 
 /* Lazy Adam on rows (M,) of param, exp_avg, exp_avg_sq (V, C) with their gradients grad (M, C).
  * lr_c is lr / (1 - beta1^t); sqrt_c2 is sqrt(1 - beta2^t). */
-void adam_rows(float *param, float *exp_avg, float *exp_avg_sq, i64 C, const i64 *rows, i64 M,
-               const float *grad, float lr_c, float beta1, float beta2, float eps, float sqrt_c2) {
+void adam_rows(float *restrict param, float *restrict exp_avg, float *restrict exp_avg_sq, i64 C,
+               const i64 *rows, i64 M, const float *restrict grad, float lr_c, float beta1,
+               float beta2, float eps, float sqrt_c2) {
 #pragma omp parallel for schedule(static)
     for (i64 i = 0; i < M; i++) {
         i64 at = rows[i] * C;

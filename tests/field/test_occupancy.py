@@ -9,7 +9,7 @@ import torch.nn.functional as F
 
 from windowshop.field import kernels
 from windowshop.field.grid import DenseGrid
-from windowshop.field.occupancy import OccupancyGrid, march_reference, ray_box
+from windowshop.field.occupancy import OccupancyGrid, any_of_corners, march_reference, ray_box
 
 needs_kernels = pytest.mark.skipif(not kernels.available("cpu"), reason="no C compiler")
 BOX = torch.tensor([[-1.0, -0.5, -0.8], [1.0, 0.5, 0.8]])
@@ -82,6 +82,19 @@ def test_set_from_vertices_marks_cells_by_their_densest_corner():
     occupancy.set_from_vertices(vertex, 0.5)
     assert occupancy.occupied[:, 0, 0].tolist() == [False, True]
     assert math.isclose(occupancy.fraction(), 0.5)
+
+
+@pytest.mark.parametrize("shape", [(9, 6, 7), (2, 13, 4), (8, 8, 8)])
+def test_corners_and_blocks_equal_max_pooling(shape):
+    """Any corner of a cell set, and any cell of a block, as max pooling gives them (the last
+    blocks of an axis of cells that BLOCK does not divide are partial)."""
+    vertex = torch.rand(shape, generator=torch.Generator().manual_seed(sum(shape))) > 0.97
+    pooled = F.max_pool3d(vertex[None, None].float(), kernel_size=2, stride=1)[0, 0] > 0
+    assert torch.equal(any_of_corners(vertex), pooled)
+    cells = vertex.clone()
+    blocks = OccupancyGrid._blocks(cells)
+    pooled = F.max_pool3d(cells[None, None].float(), kernel_size=kernels.BLOCK, ceil_mode=True)[0, 0]
+    assert blocks.dtype == torch.uint8 and torch.equal(blocks, (pooled > 0).to(torch.uint8))
 
 
 @needs_kernels

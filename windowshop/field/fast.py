@@ -25,7 +25,7 @@ from torch import nn
 from windowshop.config import FAST_PRESETS, FastConfig
 from windowshop.field.grid import DenseGrid
 from windowshop.field import kernels
-from windowshop.field.occupancy import OccupancyGrid, ray_box
+from windowshop.field.occupancy import OccupancyGrid, any_of_corners, ray_box
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
 from windowshop.render.packed import packed_distortion, packed_weights, ray_sum, sample_points
@@ -348,10 +348,10 @@ class FastModel(RadianceModel):
         trained or drawn, and the density at vertices with no cell inside starts empty (what
         `density` tells an exporter). The mask is saved with the model."""
         self.occupancy.carve(hull)
-        inside = self.occupancy.hull_at(self.occupancy.occupied.shape).float()
+        inside = self.occupancy.hull_at(self.occupancy.occupied.shape)
         # a vertex touches the cells on either side of it along each axis
-        near = F.max_pool3d(F.pad(inside[None, None], (1, 1, 1, 1, 1, 1)), 2, stride=1)[0, 0]
-        self.density_grid.values[near.view(-1) == 0] = self._raw_at_alpha(EMPTY_ALPHA)
+        near = any_of_corners(F.pad(inside, (1, 1, 1, 1, 1, 1)))
+        self.density_grid.values[~near.view(-1)] = self._raw_at_alpha(EMPTY_ALPHA)
 
     @torch.no_grad()
     def refresh_occupancy(self) -> None:

@@ -33,7 +33,9 @@ def test_ray_box_known_answers():
 
 @needs_kernels
 @pytest.mark.parametrize("share", [0.3, 0.002])  # sparse: most blocks are empty and jumped over
-def test_fused_march_equals_the_reference(share):
+@pytest.mark.parametrize("room", [0.0, 1000.0])  # samples a ray: a run overflows, or all fit
+def test_fused_march_equals_the_reference(share, room, monkeypatch):
+    monkeypatch.setattr(kernels, "_samples_per_ray", [room])
     origins, directions = random_rays(300)
     g = torch.Generator().manual_seed(3)
     grid = OccupancyGrid((23, 14, 18), BOX)

@@ -215,25 +215,51 @@ static inline i64 visit(const Occupancy *g, const float *o, const float *d, floa
     return next > (float)(k + 1) ? (i64)next : k + 1;
 }
 
-/* Samples of each ray in [t_min, t_max) whose cell is occupied: counts (R,) only. */
-void march_count(const float *origins, const float *dirs, const float *t_min, const float *t_max,
-                 const float *offsets, i64 R, float step, const Occupancy *g, i64 *counts) {
-#pragma omp parallel for schedule(dynamic, 64)
-    for (i64 r = 0; r < R; r++) {
-        i64 n = 0;
-        const float *o = origins + 3 * r, *d = dirs + 3 * r;
-        for (i64 k = 0;;) {
-            float t = sample_t(t_min[r], k, offsets[r], step);
-            if (!(t < t_max[r])) break;
-            int hit;
-            k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
-            n += hit;
+/* Samples of each ray in [t_min, t_max) whose cell is occupied, in one pass: the rays are cut into
+ * `parts` runs, each marched by one thread into its own `room` slots of t_out and ray_out (from
+ * part * room), then the runs are packed together. Returns the number of samples S, or -1 when a
+ * run had no room for all of its own (the caller then fills with march_fill from counts). counts
+ * (R,) gets every ray's samples either way. */
+i64 march_packed(const float *origins, const float *dirs, const float *t_min, const float *t_max,
+                 const float *offsets, i64 R, float step, const Occupancy *g, i64 parts, i64 room,
+                 float *t_out, i64 *ray_out, i64 *counts, i64 *used) {
+    int overflow = 0;
+#pragma omp parallel for schedule(dynamic, 1) reduction(| : overflow)
+    for (i64 p = 0; p < parts; p++) {
+        i64 s = p * room, end = s + room;
+        for (i64 r = R * p / parts; r < R * (p + 1) / parts; r++) {
+            const float *o = origins + 3 * r, *d = dirs + 3 * r;
+            i64 n = 0;
+            for (i64 k = 0;;) {
+                float t = sample_t(t_min[r], k, offsets[r], step);
+                if (!(t < t_max[r])) break;
+                int hit;
+                k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
+                if (!hit) continue;
+                if (s + n < end) {
+                    t_out[s + n] = t;
+                    ray_out[s + n] = r;
+                }
+                n++;
+            }
+            counts[r] = n;
+            s += n;
         }
-        counts[r] = n;
+        used[p] = s - p * room;
+        overflow |= s > end;
     }
+    if (overflow) return -1;
+    i64 total = 0;
+    for (i64 p = 0; p < parts; p++) {
+        memmove(t_out + total, t_out + p * room, (size_t)used[p] * sizeof(float));
+        memmove(ray_out + total, ray_out + p * room, (size_t)used[p] * sizeof(i64));
+        total += used[p];
+    }
+    return total;
 }
 
-/* The same samples written out: distances t (S,) and ray indices (S,), ray r from starts[r]. */
+/* march_packed's samples written out from known counts: distances t (S,) and ray indices (S,),
+ * ray r's from starts[r]. */
 void march_fill(const float *origins, const float *dirs, const float *t_min, const float *t_max,
                 const float *offsets, i64 R, float step, const Occupancy *g, const i64 *starts,
                 float *t_out, i64 *ray_out) {

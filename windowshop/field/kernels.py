@@ -14,6 +14,7 @@ import ctypes
 import functools
 import hashlib
 import logging
+import math
 import os
 import platform
 import shutil
@@ -34,7 +35,7 @@ _SIGNATURES = {
     "trilinear_backward": [_P, _I, _I, _I, _I, _I, _P, _P, _P],
     "touched_rows": [_P, _I, _P],
     "harvest_rows": [_P, _P, _I, _P, _I, _P],
-    "march_count": [_P, _P, _P, _P, _P, _I, _F, _P, _P],
+    "march_packed": [_P, _P, _P, _P, _P, _I, _F, _P, _I, _I, _P, _P, _P, _P],
     "march_fill": [_P, _P, _P, _P, _P, _I, _F, _P, _P, _P, _P],
     "adam_rows": [_P, _P, _P, _I, _P, _I, _P, _F, _F, _F, _F, _F],
     "trilinear_rays_forward": [_P, _I, _I, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P],
@@ -124,7 +125,7 @@ def library() -> ctypes.CDLL | None:
         return None
     for name, argtypes in _SIGNATURES.items():
         getattr(lib, name).argtypes = argtypes
-        getattr(lib, name).restype = _I if name == "touched_rows" else None
+        getattr(lib, name).restype = _I if name in ("touched_rows", "march_packed") else None
     return lib
 
 
@@ -242,6 +243,10 @@ def harvest(accum: torch.Tensor, touched: torch.Tensor) -> tuple[torch.Tensor, t
     return rows, values
 
 
+MARCH_PARTS = 32  # runs of rays that threads march in one pass, each into its own room
+_samples_per_ray = [32.0]  # room per ray for the next march: what the last one needed
+
+
 @_profiled
 def march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
           t_max: torch.Tensor, offsets: torch.Tensor, step: float, grid: tuple
@@ -254,10 +259,19 @@ def march(origins: torch.Tensor, directions: torch.Tensor, t_min: torch.Tensor,
     common = [_ptr(origins), _ptr(directions), _ptr(t_min), _ptr(t_max), _ptr(offsets), r, step,
               ctypes.byref(occupancy)]
     counts = torch.empty(r, dtype=torch.int64)
-    lib.march_count(*common, _ptr(counts))
-    ends = torch.cumsum(counts, 0)
+    parts = max(1, min(MARCH_PARTS, r))
+    room = math.ceil(r / parts * _samples_per_ray[0] * 1.25) + 16
+    t = torch.empty(parts * room, dtype=torch.float32)
+    ray = torch.empty(parts * room, dtype=torch.int64)
+    used = torch.empty(parts, dtype=torch.int64)
+    total = lib.march_packed(*common, parts, room, _ptr(t), _ptr(ray), _ptr(counts), _ptr(used))
+    # the next batch's room: as many samples a ray as the busiest run of rays had this time
+    _samples_per_ray[0] = float(used.max()) / math.ceil(r / parts) if r else _samples_per_ray[0]
+    if total >= 0:
+        return t[:total], ray[:total], counts
+    ends = torch.cumsum(counts, 0)  # a run overflowed its room: fill from the counts
     starts = (ends - counts).contiguous()
-    total = int(ends[-1]) if r else 0
+    total = int(ends[-1])
     t = torch.empty(total, dtype=torch.float32)
     ray = torch.empty(total, dtype=torch.int64)
     lib.march_fill(*common, _ptr(starts), _ptr(t), _ptr(ray))

@@ -70,13 +70,13 @@ def hull_cells(hull: torch.Tensor, cells: tuple[int, int, int]) -> torch.Tensor:
     return peak[0, 0] > 0
 
 
-
 def any_of_corners(vertex: torch.Tensor) -> torch.Tensor:
     """(X-1, Y-1, Z-1) bool: the cells of a vertex lattice (X, Y, Z) bool with any corner set,
     one axis at a time (PyTorch's CPU max_pool3d took 88 ms on 4M vertices, this 1.4 ms)."""
     vertex = vertex[1:] | vertex[:-1]
     vertex = vertex[:, 1:] | vertex[:, :-1]
     return vertex[:, :, 1:] | vertex[:, :, :-1]
+
 
 class OccupancyGrid(nn.Module):
     """A boolean grid of (OX, OY, OZ) cells tiling the box `aabb`; all cells start occupied.

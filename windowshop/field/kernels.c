@@ -215,6 +215,28 @@ static inline i64 visit(const Occupancy *g, const float *o, const float *d, floa
     return next > (float)(k + 1) ? (i64)next : k + 1;
 }
 
+/* March ray r: its occupied samples in [t_min, t_max), the first `room` of them written to t_out
+ * and ray_out; returns how many there are (which may be more than room). */
+static inline i64 march_ray(const float *origins, const float *dirs, const float *t_min,
+                            const float *t_max, const float *offsets, i64 r, float step,
+                            const Occupancy *g, i64 room, float *t_out, i64 *ray_out) {
+    const float *o = origins + 3 * r, *d = dirs + 3 * r;
+    i64 n = 0;
+    for (i64 k = 0;;) {
+        float t = sample_t(t_min[r], k, offsets[r], step);
+        if (!(t < t_max[r])) break;
+        int hit;
+        k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
+        if (!hit) continue;
+        if (n < room) {
+            t_out[n] = t;
+            ray_out[n] = r;
+        }
+        n++;
+    }
+    return n;
+}
+
 /* Samples of each ray in [t_min, t_max) whose cell is occupied, in one pass: the rays are cut into
  * `parts` runs, each marched by one thread into its own `room` slots of t_out and ray_out (from
  * part * room), then the runs are packed together. Returns the number of samples S, or -1 when a
@@ -228,22 +250,10 @@ i64 march_packed(const float *origins, const float *dirs, const float *t_min, co
     for (i64 p = 0; p < parts; p++) {
         i64 s = p * room, end = s + room;
         for (i64 r = R * p / parts; r < R * (p + 1) / parts; r++) {
-            const float *o = origins + 3 * r, *d = dirs + 3 * r;
-            i64 n = 0;
-            for (i64 k = 0;;) {
-                float t = sample_t(t_min[r], k, offsets[r], step);
-                if (!(t < t_max[r])) break;
-                int hit;
-                k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
-                if (!hit) continue;
-                if (s + n < end) {
-                    t_out[s + n] = t;
-                    ray_out[s + n] = r;
-                }
-                n++;
-            }
-            counts[r] = n;
-            s += n;
+            i64 left = s < end ? end - s : 0;
+            counts[r] = march_ray(origins, dirs, t_min, t_max, offsets, r, step, g, left,
+                                  t_out + s, ray_out + s);
+            s += counts[r];
         }
         used[p] = s - p * room;
         overflow |= s > end;
@@ -264,21 +274,9 @@ void march_fill(const float *origins, const float *dirs, const float *t_min, con
                 const float *offsets, i64 R, float step, const Occupancy *g, const i64 *starts,
                 float *t_out, i64 *ray_out) {
 #pragma omp parallel for schedule(dynamic, 64)
-    for (i64 r = 0; r < R; r++) {
-        i64 s = starts[r];
-        const float *o = origins + 3 * r, *d = dirs + 3 * r;
-        for (i64 k = 0;;) {
-            float t = sample_t(t_min[r], k, offsets[r], step);
-            if (!(t < t_max[r])) break;
-            int hit;
-            k = visit(g, o, d, t, t_min[r], offsets[r], step, k, &hit);
-            if (hit) {
-                t_out[s] = t;
-                ray_out[s] = r;
-                s++;
-            }
-        }
-    }
+    for (i64 r = 0; r < R; r++)
+        march_ray(origins, dirs, t_min, t_max, offsets, r, step, g, INT64_MAX, t_out + starts[r],
+                  ray_out + starts[r]);
 }
 
 /* Lazy Adam on rows (M,) of param, exp_avg, exp_avg_sq (V, C) with their gradients grad (M, C).

@@ -1,9 +1,15 @@
 """Packed (ragged) compositing against the dense compositing of the NeRF renderer."""
 
+import pytest
 import torch
 
+from windowshop.field import kernels
+from windowshop.render import packed
 from windowshop.render.composite import compositing_weights
-from windowshop.render.packed import packed_distortion, packed_weights, ray_starts, ray_sum
+from windowshop.render.packed import (packed_distortion, packed_weights, ray_starts, ray_sum,
+                                      ray_weights)
+
+needs_kernels = pytest.mark.skipif(not kernels.available("cpu"), reason="no C compiler")
 
 
 def test_packed_weights_equal_dense_weights_ray_by_ray():
@@ -68,3 +74,63 @@ def test_distortion_prefers_a_surface_to_fog():
     weights = torch.cat([surface, torch.full((10,), 0.09)])
     loss = packed_distortion(weights, t, 0.1, ray, counts)
     assert loss[0] < 0.2 * loss[1]
+
+
+def _ragged(seed: int, counts: list[int]):
+    torch.manual_seed(seed)
+    counts = torch.tensor(counts)
+    ray = torch.repeat_interleave(torch.arange(len(counts)), counts)
+    t = torch.rand(int(counts.sum())).sort().values * 4
+    return counts, ray, t
+
+
+def _ray_weights_and_grad(fn, sigma, t, ray, counts, upstream):
+    sigma = sigma.clone().requires_grad_()
+    outs = fn(sigma, 0.05, t, ray, counts)
+    sum(torch.sum(o * u) for o, u in zip(outs, upstream)).backward()
+    return (*outs, sigma.grad)
+
+
+def _twin(sigma, dt, t, ray, counts):
+    weights = packed_weights(sigma, dt, ray, counts)
+    return weights, ray_sum(weights, ray, len(counts)), ray_sum(weights * t, ray, len(counts))
+
+
+@needs_kernels
+def test_fused_ray_weights_equal_the_pytorch_twin_and_its_gradient():
+    # rays with no sample, one, many; densities from empty to opaque
+    counts, ray, t = _ragged(2, [0, 1, 7, 0, 40, 3])
+    sigma = torch.rand(len(t)) * 60
+    upstream = (torch.randn(len(t)), torch.randn(len(counts)), torch.randn(len(counts)))
+    fused = _ray_weights_and_grad(ray_weights, sigma, t, ray, counts, upstream)
+    twin = _ray_weights_and_grad(_twin, sigma, t, ray, counts, upstream)
+    for a, b in zip(fused, twin):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
+    assert fused[1][0] == 0 and fused[1][3] == 0  # rays with no samples are empty
+
+
+@needs_kernels
+def test_fused_ray_weights_gradient_matches_finite_differences():
+    counts, ray, t = _ragged(3, [6, 2, 9])
+    sigma = (torch.rand(len(t)) * 30).double()
+    upstream = (torch.randn(len(t)), torch.randn(3), torch.randn(3))
+
+    def loss(s):  # the fused kernels run in float32: differences of a float32 loss
+        outs = ray_weights(s.float(), 0.05, t, ray, counts)
+        return float(sum(torch.sum(o * u) for o, u in zip(outs, upstream)))
+
+    grad = _ray_weights_and_grad(ray_weights, sigma.float(), t, ray, counts, upstream)[-1]
+    h = 1e-2
+    for i in range(len(t)):
+        step = torch.zeros_like(sigma)
+        step[i] = h
+        numeric = (loss(sigma + step) - loss(sigma - step)) / (2 * h)
+        assert abs(numeric - float(grad[i])) < 2e-3 * max(1.0, abs(numeric)), i
+
+
+def test_ray_weights_without_kernels_is_the_twin(monkeypatch):
+    monkeypatch.setattr(packed.kernels, "available", lambda device: False)
+    counts, ray, t = _ragged(4, [3, 0, 5])
+    sigma = torch.rand(len(t)) * 10
+    for a, b in zip(ray_weights(sigma, 0.05, t, ray, counts), _twin(sigma, 0.05, t, ray, counts)):
+        torch.testing.assert_close(a, b)

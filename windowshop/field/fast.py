@@ -28,7 +28,7 @@ from windowshop.field import kernels
 from windowshop.field.occupancy import OccupancyGrid, any_of_corners, ray_box
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
-from windowshop.render.packed import packed_distortion, packed_weights, ray_sum, sample_points
+from windowshop.render.packed import packed_distortion, ray_weights, sample_points
 
 EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
@@ -249,12 +249,10 @@ class FastModel(RadianceModel):
             aux["occlusion"] = self._occlusion(origins, directions, t, ray, sigma * step)
         if self.training and self.config.density_dropout > 0:
             sigma = F.dropout(sigma, self.config.density_dropout)  # the rest scaled up by 1/(1-p)
-        weights = packed_weights(sigma, step, ray, samples.counts)
+        weights, opacity, depth = ray_weights(sigma, step, t, ray, samples.counts)
         if self.training and self.config.distortion > 0:
             aux["distortion"] = packed_distortion(weights, t, step, ray, samples.counts)
-        n_rays = origins.shape[0]
-        return (t, weights, ray, ray_sum(weights, ray, n_rays), ray_sum(weights * t, ray, n_rays),
-                len(samples))
+        return t, weights, ray, opacity, depth, len(samples)
 
     def _occlusion(self, origins, directions, t, ray, thickness) -> torch.Tensor:
         """FreeNeRF's occlusion penalty for a box: the rays' mean optical thickness (`thickness`

@@ -279,6 +279,49 @@ void march_fill(const float *origins, const float *dirs, const float *t_min, con
                   ray_out + starts[r]);
 }
 
+/* Compositing weights of packed ray samples (NeRF eq. 3) and their per-ray sums: ray r's samples
+ * start at starts[r], counts[r] of them in order of distance t, each an interval of length dt with
+ * density sigma; w = T (1 - exp(-sigma dt)), T = exp(-the earlier samples' optical depth), the
+ * optical depth summed in double as packed_weights does. opacity (R,) = sum w, depth (R,) = sum w t. */
+void ray_weights_forward(const float *sigma, const float *t, const i64 *starts, const i64 *counts,
+                         i64 R, float dt, float *w, float *opacity, float *depth) {
+#pragma omp parallel for schedule(dynamic, 64)
+    for (i64 r = 0; r < R; r++) {
+        double before = 0.0;
+        float o = 0.0f, d = 0.0f;
+        for (i64 n = starts[r]; n < starts[r] + counts[r]; n++) {
+            float optical = sigma[n] * dt;
+            w[n] = (float)exp(-before) * (1.0f - expf(-optical));
+            before += (double)optical;
+            o += w[n];
+            d += w[n] * t[n];
+        }
+        opacity[r] = o;
+        depth[r] = d;
+    }
+}
+
+/* The density's gradient grad_sigma (N,) of ray_weights_forward, given the gradients of w (N,),
+ * opacity and depth (R,): with G_k = grad_w[k] + grad_opacity[r] + grad_depth[r] t[k],
+ * dL/dsigma_i = dt (G_i T_{i+1} - sum over the ray's later samples k of G_k w_k). */
+void ray_weights_backward(const float *sigma, const float *t, const float *w, const i64 *starts,
+                          const i64 *counts, i64 R, float dt, const float *grad_w,
+                          const float *grad_opacity, const float *grad_depth, float *grad_sigma) {
+#pragma omp parallel for schedule(dynamic, 64)
+    for (i64 r = 0; r < R; r++) {
+        i64 lo = starts[r], hi = starts[r] + counts[r];
+        double later = 0.0, before = 0.0;
+        for (i64 n = lo; n < hi; n++)
+            later += (double)(grad_w[n] + grad_opacity[r] + grad_depth[r] * t[n]) * w[n];
+        for (i64 n = lo; n < hi; n++) {
+            double g = grad_w[n] + grad_opacity[r] + grad_depth[r] * t[n];
+            before += (double)(sigma[n] * dt);
+            later -= g * w[n];
+            grad_sigma[n] = (float)(dt * (g * exp(-before) - later));
+        }
+    }
+}
+
 /* Lazy Adam on rows (M,) of param, exp_avg, exp_avg_sq (V, C) with their gradients grad (M, C).
  * lr_c is lr / (1 - beta1^t); sqrt_c2 is sqrt(1 - beta2^t). */
 void adam_rows(float *restrict param, float *restrict exp_avg, float *restrict exp_avg_sq, i64 C,

@@ -43,6 +43,8 @@ _SIGNATURES = {
     "composite_rays_forward": [_P, _I, _I, _I, _I, _P, _P, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P],
     "composite_rays_backward": [_I, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _P,
                                 _P, _P],
+    "ray_weights_forward": [_P, _P, _P, _P, _I, _F, _P, _P, _P],
+    "ray_weights_backward": [_P, _P, _P, _P, _P, _I, _F, _P, _P, _P, _P],
     "render_composite": [_P, _P, _P, _P, _P],
     "rasterise_faces": [_P, _P, _P, _I, _I, _I, ctypes.c_double, _P, _P],
 }
@@ -226,6 +228,32 @@ def composite_rays_backward(shape: tuple[int, int, int], rays: tuple, weights: t
                                       _ptr(grad_w), _ptr(accum), _ptr(touched), _ptr(points),
                                       _ptr(grad_samples))
     return grad_w
+
+
+@_profiled
+def ray_weights_forward(sigma: torch.Tensor, t: torch.Tensor, starts: torch.Tensor,
+                        counts: torch.Tensor, dt: float
+                        ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Compositing weights (N,) of packed samples with densities `sigma` (N,) at distances `t`
+    (N,) over intervals `dt`, ray r's from starts[r] for counts[r]; and per ray (R,) their sum
+    (opacity) and their sum times t (depth)."""
+    r = counts.shape[0]
+    w = torch.empty_like(sigma)
+    opacity, depth = torch.empty(r, dtype=torch.float32), torch.empty(r, dtype=torch.float32)
+    library().ray_weights_forward(_ptr(sigma), _ptr(t), _ptr(starts), _ptr(counts), r, dt,
+                                  _ptr(w), _ptr(opacity), _ptr(depth))
+    return w, opacity, depth
+
+
+@_profiled
+def ray_weights_backward(sigma: torch.Tensor, t: torch.Tensor, w: torch.Tensor,
+                         starts: torch.Tensor, counts: torch.Tensor, dt: float,
+                         grads: tuple[torch.Tensor, torch.Tensor, torch.Tensor]) -> torch.Tensor:
+    """The gradient (N,) of `sigma` of ray_weights_forward, given `grads` of its three outputs."""
+    grad_sigma = torch.empty_like(sigma)
+    library().ray_weights_backward(_ptr(sigma), _ptr(t), _ptr(w), _ptr(starts), _ptr(counts),
+                                   counts.shape[0], dt, *(_ptr(g) for g in grads), _ptr(grad_sigma))
+    return grad_sigma
 
 
 @_profiled

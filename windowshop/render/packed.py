@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import torch
 
+from windowshop.field import kernels
+
 
 def ray_starts(counts: torch.Tensor) -> torch.Tensor:
     """Index (R,) of each ray's first sample, given samples per ray `counts` (R,)."""
@@ -40,6 +42,40 @@ def packed_weights(sigma: torch.Tensor, dt: torch.Tensor | float, ray: torch.Ten
     optical = sigma * dt
     before = _exclusive_segment_cumsum(optical, counts)
     return torch.exp(-before).to(sigma.dtype) * (1.0 - torch.exp(-optical))
+
+
+class _FusedRayWeights(torch.autograd.Function):
+    """packed_weights and the weights' per-ray sums (opacity, depth) in one kernel pair."""
+
+    @staticmethod
+    def forward(ctx, sigma, t, counts, dt: float):
+        starts = ray_starts(counts).contiguous()
+        w, opacity, depth = kernels.ray_weights_forward(sigma.detach(), t, starts, counts, dt)
+        ctx.save_for_backward(sigma, t, w, starts, counts)
+        ctx.dt = dt
+        return w, opacity, depth
+
+    @staticmethod
+    def backward(ctx, grad_w, grad_opacity, grad_depth):
+        sigma, t, w, starts, counts = ctx.saved_tensors
+        grads = tuple(torch.zeros_like(like) if g is None else g.contiguous()
+                      for g, like in ((grad_w, w), (grad_opacity, counts.float()),
+                                      (grad_depth, counts.float())))
+        grad = kernels.ray_weights_backward(sigma.detach(), t, w, starts, counts, ctx.dt, grads)
+        return grad, None, None, None
+
+
+def ray_weights(sigma: torch.Tensor, dt: float, t: torch.Tensor, ray: torch.Tensor,
+                counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Compositing weights (S,) of densities `sigma` (S,) over intervals `dt` at distances `t`
+    (S,), and per ray (R,) the opacity (their sum) and depth (their sum times t): packed_weights
+    and two ray_sums, fused into one kernel pair on the CPU."""
+    if kernels.available(sigma.device) and sigma.dtype == torch.float32:
+        return _FusedRayWeights.apply(sigma.contiguous(), t.contiguous(), counts.contiguous(),
+                                      float(dt))
+    weights = packed_weights(sigma, dt, ray, counts)
+    n_rays = counts.shape[0]
+    return weights, ray_sum(weights, ray, n_rays), ray_sum(weights * t, ray, n_rays)
 
 
 def sample_points(origins: torch.Tensor, directions: torch.Tensor, t: torch.Tensor,

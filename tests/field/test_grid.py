@@ -121,10 +121,11 @@ def test_a_grid_can_grow_while_the_last_steps_graph_is_alive(fused):
 
 
 @needs_kernels
-def test_fused_ray_sample_kernels_equal_the_reference():
+@pytest.mark.parametrize("channels", [1, 16])  # the density's width (a constant in C) and the features'
+def test_fused_ray_sample_kernels_equal_the_reference(channels):
     """Values at packed ray samples, and their per-ray weighted sums, with both gradients."""
     torch.manual_seed(2)
-    shape, channels = (16, 8, 7), 16
+    shape = (16, 8, 7)
     fused = DenseGrid(shape, channels, BOX)
     plain = DenseGrid(shape, channels, BOX, fused=False)
     with torch.no_grad():

@@ -134,3 +134,15 @@ def test_ray_weights_without_kernels_is_the_twin(monkeypatch):
     sigma = torch.rand(len(t)) * 10
     for a, b in zip(ray_weights(sigma, 0.05, t, ray, counts), _twin(sigma, 0.05, t, ray, counts)):
         torch.testing.assert_close(a, b)
+
+
+@needs_kernels
+def test_fused_ray_weights_gradient_through_the_opacity_alone():
+    counts, ray, t = _ragged(5, [4, 0, 6])
+    sigma = torch.rand(len(t)) * 20
+    grads = []
+    for fn in (ray_weights, _twin):
+        s = sigma.clone().requires_grad_()
+        fn(s, 0.05, t, ray, counts)[1].sum().backward()  # weights and depth get no gradient
+        grads.append(s.grad)
+    torch.testing.assert_close(*grads)

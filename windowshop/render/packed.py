@@ -58,9 +58,9 @@ class _FusedRayWeights(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_w, grad_opacity, grad_depth):
         sigma, t, w, starts, counts = ctx.saved_tensors
-        grads = tuple(torch.zeros_like(like) if g is None else g.contiguous()
-                      for g, like in ((grad_w, w), (grad_opacity, counts.float()),
-                                      (grad_depth, counts.float())))
+        grads = tuple(w.new_zeros(size) if g is None else g.contiguous()
+                      for g, size in ((grad_w, w.shape), (grad_opacity, counts.shape),
+                                      (grad_depth, counts.shape)))
         grad = kernels.ray_weights_backward(sigma.detach(), t, w, starts, counts, ctx.dt, grads)
         return grad, None, None, None
 

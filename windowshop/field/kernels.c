@@ -317,19 +317,20 @@ void ray_weights_forward(const float *sigma, const float *t, const i64 *starts, 
 void ray_weights_backward(const float *sigma, const float *t, const float *w, const i64 *starts,
                           const i64 *counts, i64 R, float dt, const float *grad_w,
                           const float *grad_opacity, const float *grad_depth, float *grad_sigma) {
+#define G(n) ((double)(grad_w[n] + grad_opacity[r] + grad_depth[r] * t[n]))
 #pragma omp parallel for schedule(dynamic, 64)
     for (i64 r = 0; r < R; r++) {
         i64 lo = starts[r], hi = starts[r] + counts[r];
         double later = 0.0, before = 0.0;
-        for (i64 n = lo; n < hi; n++)
-            later += (double)(grad_w[n] + grad_opacity[r] + grad_depth[r] * t[n]) * w[n];
+        for (i64 n = lo; n < hi; n++) later += G(n) * w[n];
         for (i64 n = lo; n < hi; n++) {
-            double g = grad_w[n] + grad_opacity[r] + grad_depth[r] * t[n];
+            double g = G(n);
             before += (double)(sigma[n] * dt);
             later -= g * w[n];
             grad_sigma[n] = (float)(dt * (g * exp(-before) - later));
         }
     }
+#undef G
 }
 
 /* Lazy Adam on rows (M,) of param, exp_avg, exp_avg_sq (V, C) with their gradients grad (M, C).
@@ -466,10 +467,8 @@ void composite_rays_forward(const float *values, i64 X, i64 Y, i64 Z, i64 C,
         for (i64 n = starts[r]; n < starts[r] + counts[r]; n++) {
             float g[3], *f = features + n * C;
             sample_point(origins, dirs, t, ray, n, lo, inv_voxel, g);
-            BY_WIDTH(C, {
-                interp(values, X, Y, Z, W, g, f);
-                for (i64 ch = 0; ch < W; ch++) o[ch] += w[n] * f[ch];
-            });
+            interp(values, X, Y, Z, C, g, f);
+            for (i64 ch = 0; ch < C; ch++) o[ch] += w[n] * f[ch];
         }
     }
 }

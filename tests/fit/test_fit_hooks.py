@@ -16,7 +16,7 @@ from windowshop.field.nerf import NerfModel
 from windowshop.fit.callbacks import FitCallbacks, FitCancelled
 from windowshop.fit.checkpoint import load_checkpoint
 from windowshop.fit.losses import LossInput, LossTerm, loss_terms, total_loss
-from windowshop.fit.schedule import StepInfo, schedule_for
+from windowshop.fit.schedule import StepInfo, exponential, schedule_for
 from windowshop.fit.trainer import fit
 from windowshop.model import Bounds, RenderOutput
 from windowshop.render.composite import composite
@@ -176,8 +176,20 @@ def test_the_fast_schedule_grows_the_grid_at_the_growth_points():
         if model.grid_shape != shape:
             grown.append((step, model.grid_shape))
     assert grown == [(10, former[1]), (20, former[2]), (30, former[3])]
-    config = model.config  # the grids' rate, decayed 99% of the way to lr_final
-    assert optimizer.param_groups[0]["lr"] == pytest.approx(config.lr_grid * config.lr_final ** 0.99)
+    config = model.config  # the grids' rate 99% of the way: inside the anneal of the last lr_tail
+    tail = (0.99 - (1.0 - config.lr_tail)) / config.lr_tail
+    assert optimizer.param_groups[0]["lr"] == pytest.approx(
+        config.lr_grid * config.lr_final ** 0.99 * config.lr_tail_factor ** tail)
+
+
+def test_the_learning_rate_decays_then_anneals_over_the_tail():
+    factor = exponential(0.25, tail=0.2, tail_factor=0.1)
+    assert factor(0.0) == 1.0 and factor(-1.0) == 1.0
+    assert factor(0.5) == pytest.approx(0.5)  # 0.25 ** 0.5: the tail not reached
+    assert factor(0.8) == pytest.approx(0.25 ** 0.8)  # the tail starts without a jump ...
+    assert factor(0.9) == pytest.approx(0.25 ** 0.9 * 0.1 ** 0.5)  # ... halfway: sqrt(0.1) more
+    assert factor(1.0) == pytest.approx(0.025) and factor(2.0) == pytest.approx(0.025)
+    assert exponential(0.25)(1.0) == pytest.approx(0.25)  # no tail: the plain decay
 
 
 def test_occupancy_refreshes_on_its_cadence_and_after_growth(monkeypatch):

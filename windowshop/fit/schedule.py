@@ -38,9 +38,17 @@ class Hook:
         pass
 
 
-def exponential(final: float) -> Callable[[float], float]:
-    """The factor falling from 1 at progress 0 to `final` at 1 (clamped to [0, 1])."""
-    return lambda fraction: final ** min(max(fraction, 0.0), 1.0)
+def exponential(final: float, tail: float = 0.0, tail_factor: float = 1.0
+                ) -> Callable[[float], float]:
+    """The factor falling from 1 at progress 0 to `final` at 1 (clamped to [0, 1]), and over the
+    last `tail` of the progress by `tail_factor` more, exponentially too (so `final * tail_factor`
+    at 1). The tail is the decay phase of warmup-stable-decay schedules (Hägele et al. 2024):
+    a run of any length gains most of annealing's benefit from its last part."""
+    def factor(fraction: float) -> float:
+        x = min(max(fraction, 0.0), 1.0)
+        into_tail = (x - (1.0 - tail)) / tail if tail > 0 else 0.0
+        return final ** x * tail_factor ** max(into_tail, 0.0)
+    return factor
 
 
 @dataclass
@@ -121,10 +129,11 @@ def nerf_schedule(model: RadianceModel) -> list[Hook]:
 
 
 def fast_schedule(model: RadianceModel) -> list[Hook]:
-    """Learning rates decayed to `lr_final` of their start; grids grown coarse to fine, the
-    occupancy grid refreshed (order matters: a refresh follows the growth of the same step)."""
+    """Learning rates decayed to `lr_final` of their start, then annealed over the budget's last
+    `lr_tail` by `lr_tail_factor`; grids grown coarse to fine, the occupancy grid refreshed (order
+    matters: a refresh follows the growth of the same step)."""
     config = model.config
-    return [LearningRate(exponential(config.lr_final)),
+    return [LearningRate(exponential(config.lr_final, config.lr_tail, config.lr_tail_factor)),
             GridGrowth(config.growth, config.start_fraction, config.rays_per_voxel),
             OccupancyRefresh(config.occupancy_warmup, config.occupancy_every, model.grid_shape)]
 

@@ -96,10 +96,10 @@ class FastConfig:
     lr_grid: float = 0.2  # Adam on both grids ...
     lr_mlp: float = 1e-2  # ... and on the MLP
     lr_final: float = 0.3  # learning rates decay exponentially to this factor ...
-    # ... and over the budget's last `lr_tail` by `lr_tail_factor` more: the anneal pays on long
-    # runs (lego 400x400 in 300 s: +0.4 dB) where a lower lr_final all along loses on short ones
-    lr_tail: float = 0.15
-    lr_tail_factor: float = 0.1
+    # ... then anneal at the end: it pays on long runs (lego 400x400 in 300 s: +0.4 dB) where a
+    # lower lr_final all along loses on short ones (bench/RESULTS.md, "anneal")
+    lr_tail: float = 0.15  # over this last share of the budget (0: no anneal) ...
+    lr_tail_factor: float = 0.1  # ... the rates fall by this factor more, exponentially
     occupancy_warmup: int = 64  # steps before empty cells are first skipped
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped

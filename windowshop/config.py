@@ -86,10 +86,12 @@ class FastConfig:
     hidden: int = 64  # width of the colour MLP's one hidden layer
     mlp_bf16: bool = True  # run the MLP in bfloat16 where the hardware has it (CPU: AVX512-BF16)
     sh_degree: int = 2  # spherical harmonics of the view direction fed to it (-1: no view dependence)
-    step: float = 0.5  # marching step when training, in voxels of the current grid
-    # ... and when rendering: a trilinear grid has no detail finer than a voxel, so 0.75 changes
-    # a frame by under one 8-bit level (48-54 dB against 0.5) and marches 1.5x fewer samples
-    render_step: float = 0.75
+    # A trilinear grid has no detail finer than a voxel, so a render step of 0.75 changes a frame
+    # by under one 8-bit level (48-54 dB against 0.5) and marches 1.5x fewer samples. Training
+    # near it gives a budget more steps (bench/RESULTS.md, "train as it renders"): None: 0.7, or
+    # 0.5 with few photos, whose fits the steps do not limit
+    step: float | None = None  # marching step when training, in voxels of the current grid ...
+    render_step: float = 0.75  # ... and when rendering
     alpha_init: float = 1e-2  # opacity of one final-resolution step at initialisation
     # Learning rates: swept at the steps the budgets give (bench/RESULTS.md, "learning rates");
     # nothing gains on lego without losing on temple or lego_tiny
@@ -103,10 +105,12 @@ class FastConfig:
     occupancy_warmup: int = 64  # steps before empty cells are first skipped
     occupancy_every: int = 16  # steps between refreshes of the occupancy grid
     occupancy_alpha: float = 2e-2  # cells with no corner this opaque (per final step) are skipped
-    weight_threshold: float = 1e-4  # samples below this compositing weight get no colour evaluated
-    # ... when rendering, where rays also stop at this transmittance: under 1/255, so what is left
-    # behind can move no pixel by an 8-bit level (3e-3 against 1e-3: -17% render time, same PSNR)
-    render_threshold: float = 3e-3
+    # Under 1/255, what a ray leaves behind can move no pixel by an 8-bit level (3e-3 against
+    # 1e-3: -17% render time, same PSNR). Training at the same threshold spends no reads and
+    # gradients on samples no frame shows: None: 3e-3, or 1e-4 with few photos, whose shape
+    # the faint samples' colour still helps (8 views -0.3 dB at 3e-3)
+    weight_threshold: float | None = None  # samples below this compositing weight get no colour ...
+    render_threshold: float = 3e-3  # ... and when rendering, where rays also stop at this transmittance
     tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
     carve: bool = True  # masked scenes: never occupy space outside the visual hull of the masks
     # Few-photo priors (issue 17; bench/RESULTS.md measures each): a setting left at None is chosen

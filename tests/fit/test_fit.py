@@ -116,6 +116,11 @@ def test_few_photo_priors_switch_on_at_or_under_few_views():
     assert with_priors(FastConfig(distortion=0.5, masked=False), 8).distortion == 0.5
     assert not with_priors(FastConfig(distortion=0.5, masked=False), 8).masked
     assert with_priors(FastConfig(), None).distortion == 0.0  # a model built without a scene
+    # many photos train at about the render step and threshold; few keep the finer ones
+    assert (few.step, few.weight_threshold) == (0.5, 1e-4)
+    assert (many.step, many.weight_threshold) == (0.7, 3e-3)
+    assert with_priors(FastConfig(step=0.6, weight_threshold=1e-3), 8).step == 0.6
+    assert with_priors(FastConfig(step=0.6, weight_threshold=1e-3), 30).weight_threshold == 1e-3
 
 
 def test_few_photos_stop_after_their_passes_over_the_pixels():

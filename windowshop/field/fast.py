@@ -81,8 +81,10 @@ def with_priors(config: FastConfig, photos: int | None) -> FastConfig:
     max_passes = (50.0 if few else 0.0) if config.max_passes is None else config.max_passes
     masked = True if config.masked is None else config.masked
     masked_until = (1.0 if few else 0.5) if config.masked_until is None else config.masked_until
+    step = (0.5 if few else 0.7) if config.step is None else config.step
+    threshold = (1e-4 if few else 3e-3) if config.weight_threshold is None else config.weight_threshold
     return replace(config, distortion=distortion, tv_features=tv_features, max_passes=max_passes,
-                   masked=masked, masked_until=masked_until)
+                   masked=masked, masked_until=masked_until, step=step, weight_threshold=threshold)
 
 
 class FastModel(RadianceModel):

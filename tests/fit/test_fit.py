@@ -301,3 +301,19 @@ def test_a_batch_over_the_memory_budget_gets_the_gradient_of_one_pass():
         grads.append(torch.cat([p.grad.flatten() for p in model.parameters()]))
         assert samples == 144 * TINY.n_coarse
     assert torch.allclose(grads[0], grads[1], atol=1e-6, rtol=1e-4)
+
+
+def test_pixel_bank_draws_every_pixel_once_a_pass():
+    views = toy_scene().split("train")
+    n = sum(v.camera.width * v.camera.height for v in views)
+    for i, view in enumerate(views):  # each pixel's red is its flat index in the bank
+        start = sum(v.camera.width * v.camera.height for v in views[:i])
+        view.image = np.repeat(np.arange(start, start + view.image.shape[0] * view.image.shape[1],
+                                         dtype=np.float32).reshape(*view.image.shape[:2], 1), 3, -1)
+    bank = PixelBank(views, "cpu")
+    torch.manual_seed(0)
+    drawn = torch.cat([bank.sample(100).rgb[:, 0] for _ in range(2 * n // 100 + 1)]).long()
+    first, second = drawn[:n], drawn[n:2 * n]  # batches of 100 straddle the passes' edge
+    assert torch.equal(first.sort().values, torch.arange(n))
+    assert torch.equal(second.sort().values, torch.arange(n))
+    assert not torch.equal(first, second)  # each pass in a fresh order

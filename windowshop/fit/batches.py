@@ -1,8 +1,8 @@
-"""Random batches of training rays drawn uniformly from the pixels of every training view, and
-rays from cameras with no photo (for losses on views nobody took).
+"""Random batches of training rays drawn from the pixels of every training view (each pixel once a
+pass), and rays from cameras with no photo (for losses on views nobody took).
 
 Only the pixel colours live in memory; a batch's rays are computed from its pixels' cameras, so
-100 views of 400x400 cost their 192 MB of colour and nothing per ray.
+100 views of 400x400 cost their 192 MB of colour, 64 MB of drawing order and nothing per ray.
 """
 
 from __future__ import annotations
@@ -64,6 +64,7 @@ class PixelBank:
         self.starts = torch.tensor(np.cumsum([0] + sizes[:-1]), dtype=torch.long, device=device)
         self.widths = torch.tensor([v.camera.width for v in views], dtype=torch.long, device=device)
         self.intrinsics, self.c2w = camera_tables([v.camera for v in views], self.device)
+        self._order, self._at = torch.empty(0, dtype=torch.long, device=self.device), 0  # see sample
 
     def __len__(self) -> int:
         return self.rgb.shape[0]
@@ -82,8 +83,19 @@ class PixelBank:
                         over=self.over)
 
     def sample(self, n: int) -> RayBatch:
-        """`n` rays through pixels drawn uniformly with replacement (torch's global generator)."""
-        return self.rays(torch.randint(len(self), (n,), device=self.device))
+        """`n` rays through pixels drawn without replacement, pass by pass: each pass over the
+        bank takes a fresh random order (torch's global generator), as the NeRF paper's code
+        shuffles its rays. Under one pass every ray is then a new pixel: lego 400x400 in 60 s sees
+        87% of its pixels against 58% drawn with replacement (bench/RESULTS.md, "passes")."""
+        parts = []
+        while n > 0:
+            if self._at == len(self._order):
+                dtype = torch.int32 if len(self) < 2**31 else torch.int64  # a third of the colours
+                self._order, self._at = torch.randperm(len(self), dtype=dtype, device=self.device), 0
+            parts.append(self._order[self._at:self._at + n])
+            self._at += len(parts[-1])
+            n -= len(parts[-1])
+        return self.rays(torch.cat(parts).long())
 
 
 class CameraRays:

@@ -18,14 +18,18 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interacti
 MODELS = {"fast": "fast", "nerf_tiny": "nerf --preset tiny"}
 
 
-def races(rows: list[dict]) -> list[tuple[str, dict]]:
-    """(title, race) for every training race in the benchmark rows (fewer has one per view count)."""
+def races(rows: list[dict]) -> list[tuple[str, dict, float | None]]:
+    """(title, race, target PSNR) for every training race in the benchmark rows (fewer has one per
+    view count, with the few-photo priors on and off)."""
     out = []
     for row in rows:
         if "fast" in row:
-            out.append((row["row"], row))
+            out.append((f"{row['row']}, {row['seconds']:g} s", row, row.get("target_psnr")))
+        targets = dict(zip((5, 10, 25), row.get("target_psnr") or [])) if "runs" in row else {}
         for run in row.get("runs", []):
-            out.append((f"{row['row']}: {run['views']} views, {run['background']}", run))
+            priors = "priors on" if run["priors"] else "priors off"
+            out.append((f"{row['row']}: {run['views']} views, {priors}", run,
+                        targets.get(run["views"]) if run["priors"] else None))
     return out
 
 
@@ -39,12 +43,11 @@ def plot(rows: list[dict], path: Path) -> Path:
     fig, axes = plt.subplots(rows_, columns, figsize=(4.4 * columns, 3.4 * rows_), squeeze=False)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
-    for ax, (title, race) in zip(axes.flat, panels):
+    for ax, (title, race, target) in zip(axes.flat, panels):
         for key, label in MODELS.items():
             if key in race:
                 curve = race[key]["curve"]
                 ax.plot([p["seconds"] for p in curve], [p["psnr"] for p in curve], "o-", label=label)
-        target = next((r.get("target_psnr") for r in rows if r.get("row") == title), None)
         if target:
             ax.axhline(target, color="grey", linestyle="--", linewidth=1, label=f"target {target:g}")
         ax.set_title(title)

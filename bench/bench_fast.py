@@ -203,12 +203,13 @@ def row_lego400(args, device):
 def row_fewer(args, device):
     """5, 10, 25 views with the defaults (lego's mattes trained over random colours inside the
     visual hull, to the end at or under 20 photos and for half the budget above; the few-photo
-    priors on at or under 20: the distortion loss, the features' total variation, at most 50
-    passes over the pixels), then with all of them off; the NeRF beside the defaults."""
+    priors on at or under 20: the distortion loss, the features' and the density's total
+    variation, at most 50 passes over the pixels), then with all of them off; the NeRF beside the
+    defaults."""
     rows = []
     for priors in (True, False):
         overrides = {} if priors else {"masked": False, "distortion": 0.0, "tv_features": 0.0,
-                                       "max_passes": 0.0}
+                                       "tv_density": 0.0, "max_passes": 0.0}
         for views in (5, 10, 25):
             scene = lego(SceneOptions(downscale=4, views=views, test_views=25))
             row, _ = race(scene, args.seconds or 30.0, args, device, nerf=priors, **overrides)

@@ -111,7 +111,6 @@ class FastConfig:
     # the faint samples' colour still helps (8 views -0.3 dB at 3e-3)
     weight_threshold: float | None = None  # samples below this compositing weight get no colour ...
     render_threshold: float = 3e-3  # ... and when rendering, where rays also stop at this transmittance
-    tv_density: float = 0.0  # total-variation weight on the raw density grid at the samples
     carve: bool = True  # masked scenes: never occupy space outside the visual hull of the masks
     # Few-photo priors (issue 17; bench/RESULTS.md measures each): a setting left at None is chosen
     # by the number of training photos, on at or under `few_views`, off above it.
@@ -121,6 +120,10 @@ class FastConfig:
     # total variation of the feature grid where samples show (colour varies smoothly where few
     # photos pin it): None: 0.003 with few photos
     tv_features: float | None = None
+    # total variation of the raw density at the samples, its changes measured over 1/128 of the
+    # box's longest side at any grid resolution (a smooth shape where few photos pin it; 8 views
+    # of 400x400 +1.0 dB in 120 s): None: 1e-4 with few photos
+    tv_density: float | None = None
     # stop after this many passes over the training pixels (0: never): a fit on few small photos
     # fits them closer after that but renders other views worse (5 views of 100x100 lose 0.8 dB
     # from 40 to 245 passes): None: 50 with few photos

@@ -163,7 +163,7 @@ def test_the_pure_pytorch_path_learns_too(scene, monkeypatch):
 def uniform_fog(**overrides) -> FastModel:
     """A fast model over the unit box filled with one density, in training mode."""
     bounds = Bounds(aabb=((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)), near=0.5, far=6.0)
-    model = FastModel(FastConfig(voxels=16**3, growth=(), **overrides), bounds)
+    model = FastModel(FastConfig(**{"voxels": 16**3, "growth": (), **overrides}), bounds)
     with torch.no_grad():
         model.density_grid.values.fill_(model._raw_at_alpha(0.05))
     return model.train()
@@ -188,6 +188,21 @@ def test_density_dropout_only_trains_on_a_random_share_of_the_samples():
     model.eval()
     kept = model.render_rays(origins, directions, torch.ones(64, 3)).opacity
     torch.testing.assert_close(kept, kept[:1].expand(64))
+
+
+def test_the_density_total_variation_is_the_fields_change_over_a_fixed_span_at_any_resolution():
+    # raw density rising by 1 a world unit along x; rays along y, so every neighbour along x
+    # lies inside the box: the change over 1/128 of the box's side (2) is 2/128 along x, none
+    # along y and z, whatever the voxel
+    origins = torch.tensor([[0.13, -3.0, -0.21]]).expand(64, 3)
+    directions = torch.tensor([[0.0, 1.0, 0.0]]).expand(64, 3)
+    for side in (16, 32):
+        model = uniform_fog(tv_density=1.0, voxels=side**3)
+        x = torch.linspace(-1.0, 1.0, model.grid_shape[0])
+        with torch.no_grad():
+            model.density_grid.values[:, 0] += x[:, None, None].expand(model.grid_shape).reshape(-1)
+        tv = model.render_rays(origins, directions, torch.ones(64, 3)).aux["tv_density"]
+        torch.testing.assert_close(float(tv.detach()), (2 / 128) ** 2 / 3, rtol=1e-4, atol=0)
 
 
 def ramp_in_fog(**overrides) -> FastModel:

@@ -110,8 +110,10 @@ def test_masked_training_returns_to_the_scenes_own_colour_late_unless_it_has_non
 
 def test_few_photo_priors_switch_on_at_or_under_few_views():
     few, many = with_priors(FastConfig(), 20), with_priors(FastConfig(), 21)
-    assert (few.distortion, few.tv_features, few.max_passes, few.masked_until) == (0.01, 0.003, 50, 1.0)
-    assert (many.distortion, many.tv_features, many.max_passes, many.masked_until) == (0, 0, 0, 0.5)
+    assert (few.distortion, few.tv_features, few.tv_density, few.max_passes, few.masked_until) == (
+        0.01, 0.003, 1e-4, 50, 1.0)
+    assert (many.distortion, many.tv_features, many.tv_density, many.max_passes, many.masked_until
+            ) == (0, 0, 0, 0, 0.5)
     assert few.masked and many.masked  # mattes train over random colours at any count
     assert with_priors(FastConfig(distortion=0.5, masked=False), 8).distortion == 0.5
     assert not with_priors(FastConfig(distortion=0.5, masked=False), 8).masked

@@ -120,8 +120,8 @@ def test_virtual_priors_are_virtual_terms_and_train_the_fast_model(tmp_path):
     config = FastConfig(voxels=16**3, depth_smoothness=1.0, virtual_entropy=0.1, virtual_patches=2,
                         patch_size=4)
     assert {t.name: t.virtual for t in loss_terms(with_priors(config, 4))} == {
-        "photometric": False, "distortion": False, "tv_features": False, "depth_smoothness": True,
-        "virtual_entropy": True}
+        "photometric": False, "distortion": False, "tv_density": False, "tv_features": False,
+        "depth_smoothness": True, "virtual_entropy": True}
     metrics = fit(synthetic_scene(n_train=4, n_test=1, size=12), "fast", config,
                   FitConfig(iters=3, batch_rays=64), tmp_path, "cpu", show_progress=False)
     assert metrics["iterations"] == 3 and math.isfinite(metrics["psnr"])

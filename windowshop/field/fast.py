@@ -34,7 +34,7 @@ EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (nex
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
 MIN_VOXELS = 16**3
 TV_RAYS = 8  # training rays per probe pair of the features' total variation (2 or 4: no better)
-TV_SPAN = 128  # the density's total variation is of its changes over 1/TV_SPAN of the box's side
+TV_SPAN = 128  # the density's total variation: its changes over 1/TV_SPAN of the box's longest side
 CARVE_VOXELS = 96**3  # the finest carve mask (FastModel.carve_cells)
 # bytes one marched sample takes (t, weight, ray index, its density and feature reads), and while
 # training with its gradients: lego_tiny's final grid with every cell occupied peaked at 96 and 220
@@ -267,8 +267,9 @@ class FastModel(RadianceModel):
         return torch.sum(thickness * near) / origins.shape[0]
 
     def _density_with_tv(self, origins, directions, t, ray) -> tuple[torch.Tensor, torch.Tensor]:
-        """Raw density (S,) at the samples and its total variation: the mean squared change one
-        voxel away along each axis from every sample (one grid read, so one sparse gradient)."""
+        """Raw density (S,) at the samples and its total variation: the mean squared change from
+        every sample to one voxel away along each axis, scaled to a change over 1/TV_SPAN of the
+        box's longest side (one grid read, so one sparse gradient)."""
         points = sample_points(origins, directions, t, ray)
         voxel = self.density_grid.voxel
         steps = torch.diag(voxel)  # (3, 3)

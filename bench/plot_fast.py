@@ -25,8 +25,10 @@ def races(rows: list[dict]) -> list[tuple[str, dict, float | None]]:
     for row in rows:
         if "fast" in row:
             out.append((f"{row['row']}, {row['seconds']:g} s", row, row.get("target_psnr")))
-        targets = dict(zip((5, 10, 25), row.get("target_psnr") or [])) if "runs" in row else {}
-        for run in row.get("runs", []):
+        runs = row.get("runs", [])
+        views = list(dict.fromkeys(run["views"] for run in runs))  # the counts, in the row's order
+        targets = dict(zip(views, row.get("target_psnr") or [])) if runs else {}
+        for run in runs:
             priors = "priors on" if run["priors"] else "priors off"
             out.append((f"{row['row']}: {run['views']} views, {priors}", run,
                         targets.get(run["views"]) if run["priors"] else None))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pycolmap
+import pytest
 
 from windowshop.photos import fill
 from windowshop.photos.output import posed_photos
@@ -114,3 +115,37 @@ def test_fill_needs_three_placed(tmp_path):
         model.deregister_frame(image_id)
     assert fill.fill(model, database, names, seed=0) == fill.Filled()
     assert model.num_reg_images() == 2
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_a_pairs_pose_reads_each_match_by_its_own_features(tmp_path, seed):
+    """The verified matches index each image's whole feature list (pycolmap reads them by
+    index): with features neither photo shares listed first and photo 7's in a shuffled order,
+    the pair (0, 7) gives the true relative pose."""
+    rng = np.random.default_rng(seed)
+    shared, own = rng.uniform(-1, 1, (40, 3)), rng.uniform(-1, 1, (100, 3))
+    order = rng.permutation(len(shared))  # photo 7's shared feature k shows point order[k]
+    camera = pycolmap.Camera(model="SIMPLE_PINHOLE", width=WIDTH, height=HEIGHT,
+                             params=[FOCAL, WIDTH / 2, HEIGHT / 2], camera_id=1)
+    database = tmp_path / "database.db"
+    with pycolmap.Database.open(database) as db:
+        db.write_camera(camera, use_camera_id=True)
+        for image_id, index, points in ((1, 0, np.concatenate([own, shared])),
+                                        (2, PAIRED, np.concatenate([own[::-1], shared[order]]))):
+            keypoints = _project(_w2c(index), points)
+            db.write_image(pycolmap.Image(name=f"{index:02d}.jpg", camera_id=1,
+                                          image_id=image_id), use_image_id=True)
+            db.write_keypoints(image_id, np.hstack([keypoints, np.zeros((len(points), 4))])
+                               .astype(np.float32))
+        geometry = pycolmap.TwoViewGeometry()
+        geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+        geometry.E = _essential(_w2c(0), _w2c(PAIRED))
+        geometry.inlier_matches = len(own) + np.stack([order, np.arange(len(shared))], axis=1)
+        db.write_two_view_geometry(1, 2, geometry)
+        rotation, direction, inliers = fill._relative(db, 1, 2, (camera, camera))
+    first, second = _w2c(0), _w2c(PAIRED)
+    truth = second[:, :3] @ first[:, :3].T  # photo 7's camera from photo 0's
+    centre = first[:, :3] @ (-second[:, :3].T @ second[:, 3]) + first[:, 3]  # in 0's axes
+    assert inliers == len(shared)
+    assert np.allclose(rotation, truth, atol=1e-6)
+    assert np.allclose(direction, centre / np.linalg.norm(centre), atol=1e-6)

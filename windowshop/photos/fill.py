@@ -128,33 +128,15 @@ def _relative(db: pycolmap.Database, placed_id: int, image_id: int,
     matches = geometry.inlier_matches
     if len(matches) < MIN_PAIR_INLIERS:
         return None
-    points = [db.read_keypoints(i)[m, :2].astype(np.float64)
-              for i, m in ((placed_id, matches[:, 0]), (image_id, matches[:, 1]))]
-    if not pycolmap.estimate_two_view_geometry_pose(cameras[0], points[0], cameras[1], points[1],
-                                                     geometry):
+    # pycolmap reads the inliers' features by index: it needs each image's whole keypoint list
+    keypoints = [db.read_keypoints(i)[:, :2].astype(np.float64) for i in (placed_id, image_id)]
+    if not pycolmap.estimate_two_view_geometry_pose(cameras[0], keypoints[0], cameras[1],
+                                                     keypoints[1], geometry):
         return None
     pose = geometry.cam2_from_cam1  # image from placed
     rotation = pose.rotation.matrix()
-    rays = [np.hstack([cam.cam_from_img(p), np.ones((len(p), 1))])
-            for cam, p in zip(cameras, points)]
-    translation = pose.translation * _cheirality_sign(rotation, pose.translation, *rays)
-    direction = -rotation.T @ translation  # the image's centre, placed camera's axes
+    direction = -rotation.T @ pose.translation  # the image's centre, placed camera's axes
     return rotation, direction / np.linalg.norm(direction), len(matches)
-
-
-def _cheirality_sign(rotation: np.ndarray, translation: np.ndarray, rays1: np.ndarray,
-                     rays2: np.ndarray) -> float:
-    """+1 or -1: the sign of the relative `translation` (3,) (x2 = R x1 + t) that puts more
-    of the matched points in front of both cameras; rays (M, 3) in each camera's axes. (An
-    essential matrix leaves the sign open; pycolmap's choice flipped now and then here.)"""
-    turned = rays1 @ rotation.T  # (M, 3) ray 1 in camera 2's axes
-    # depths (d1, d2) with d1 R x1 + t = d2 x2, in least squares, for t and for -t
-    a = np.stack([turned, -rays2], axis=2)  # (M, 3, 2)
-    across = a.transpose(0, 2, 1)  # (M, 2, 3)
-    depths = np.linalg.solve(across @ a, -(across @ translation)[..., None])[..., 0]  # (M, 2)
-    ahead = np.all(depths > 0, axis=1).sum()
-    behind = np.all(depths < 0, axis=1).sum()  # in front of both for -t
-    return 1.0 if ahead >= behind else -1.0
 
 
 def _agree(rotations: list[np.ndarray]) -> bool:

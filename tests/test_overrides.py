@@ -13,7 +13,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from windowshop.cli import build_parser
 from windowshop.config import FitConfig, PipelineConfig, RunConfig, VideoOptions
 from windowshop.errors import UserError
-from windowshop.model import apply_run_overrides
+from windowshop.model import apply_run_overrides, model_config
 from windowshop.overrides import (add_flags, apply_overrides, field_help, flag_values, leaves,
                                   parse_assignments)
 
@@ -98,6 +98,19 @@ def test_set_items_are_yaml_scalars():
         "fit.seconds": 30, "mlp_bf16": False, "path": "spiral"}
     with pytest.raises(UserError, match="expected KEY=VALUE"):
         parse_assignments(["seconds"])
+
+
+def test_exponents_without_a_dot_are_numbers():
+    # YAML 1.1 (PyYAML) reads 1e-4 as text, so `--set tv_density=1e-4` and a study grid's
+    # `tv_density: 1e-4` used to fail with "must be a number"
+    run = apply_run_overrides(RunConfig(), parse_assignments(["tv_density=1e-4", "lr_grid=2E-1"]))
+    fast = model_config(run.model, **run.model_settings)
+    assert (fast.tv_density, fast.lr_grid) == (1e-4, 0.2)
+    assert apply_overrides(Job(), {"lens.vignette": "5e-1"}).lens.vignette == 0.5
+    with pytest.raises(UserError, match="vignette must be a number, got 'e-1'"):
+        apply_overrides(Job(), {"lens.vignette": "e-1"})
+    with pytest.raises(UserError, match="frames must be an integer"):
+        apply_overrides(Job(), {"frames": "1e2"})
 
 
 def test_api_settings_field_lists_every_knob(tmp_path):

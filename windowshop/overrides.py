@@ -106,6 +106,8 @@ def check_value(key: str, value: Any, hint: Any, where: str) -> Any:
     expected = next((k for k in (bool, int, float, str, tuple) if k in kinds), None)
     if isinstance(value, str) and expected not in (str, None):
         value = _from_text(value, expected)
+    if expected is float:
+        value = _number(value)
     ok = {bool: lambda v: isinstance(v, bool),
           int: lambda v: isinstance(v, int) and not isinstance(v, bool),
           float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
@@ -125,6 +127,16 @@ def _from_text(text: str, expected: type) -> Any:
         return yaml.safe_load(text) if text.strip() else None
     except yaml.YAMLError:
         return text
+
+
+def _number(value: Any) -> Any:
+    """`value`, or the float a string spells: YAML 1.1 reads `1e-4` (no dot) as text."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    return value
 
 
 def apply_overrides(config: Any, overrides: dict[str, Any], where: str = "settings") -> Any:

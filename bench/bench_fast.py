@@ -45,8 +45,8 @@ from windowshop.config import FitConfig, SceneOptions, VideoOptions
 from windowshop.device import ThreadTuner, pick_device
 from windowshop.fit.evaluate import evaluate_views, held_out_views, target_image
 from windowshop.fit.losses import loss_terms
-from windowshop.fit.trainer import (Progress, TrainingRun, capped_by_passes, carve_to_scene, train_step,
-                                    training_pixels, virtual_sampler)
+from windowshop.fit.trainer import (Progress, TrainingRun, capped_by_passes, carve_to_scene, finish,
+                                    train_step, training_pixels, virtual_sampler)
 from windowshop.metrics import psnr_of_mse
 from windowshop.model import Bounds, model_class, model_config
 from windowshop.rays import camera_rays
@@ -111,7 +111,8 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
           device: torch.device):
     """Train `name` for `seconds` of training time, probing PSNR when it passes each mark.
 
-    The same steps as `windowshop fit` (trainer.train_step); probing is not counted as training.
+    The same steps as `windowshop fit` (trainer.train_step, then trainer.finish); probing is not
+    counted as training.
     Returns the model and {"iterations", "train_seconds", "curve": [{seconds, step, psnr}]}.
     """
     run, bank, background = start_run(scene, name, config, seconds, device)
@@ -126,10 +127,14 @@ def train(scene, name: str, config, seconds: float, probe: Probe, marks: list[fl
                     pending.pop(0)
                 curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
                               "psnr": round(probe.psnr(model), 3)})
+    start = time.perf_counter()
+    finish(run, bank)
+    finish_seconds = time.perf_counter() - start
     curve.append({"seconds": round(run.progress.elapsed, 2), "step": run.progress.step,
                   "psnr": round(probe.psnr(model), 3)})
     return model, {"iterations": run.progress.step, "train_seconds": round(run.progress.elapsed, 2),
-                   "steps_by_threads": dict(tuner.used), "curve": curve}
+                   "finish_seconds": round(finish_seconds, 2), "steps_by_threads": dict(tuner.used),
+                   "curve": curve}
 
 
 def race(scene, seconds: float, args, device: torch.device, nerf: bool = True,

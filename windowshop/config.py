@@ -137,6 +137,13 @@ class FastConfig:
     # 100 of 400x400 +0.5 against never masked): None: 1 (to the end) with few photos, whose
     # shape needs the random colours throughout, else 0.5
     masked_until: float | None = None
+    # at the end of training, empty the space that no training ray reached with at least this
+    # transmittance (0: keep it): behind every photo's surface the density is free, and what it
+    # holds under a plate photographed from above shows as haze from below (8 views of 400x400
+    # +0.4 dB at 0.1). Off, as real captures lose 0.1-0.2 dB where a photo between the training
+    # ones sees into what they barely reached, and a capture from one side would turn hollow
+    # from behind (bench/RESULTS.md, "Few photos, round five")
+    empty_unseen: float = 0.0
     # RegNeRF's priors on patches of rays from random cameras with no photo (fit/virtual.py):
     depth_smoothness: float = 0.0  # neighbouring rays' surface depths agree
     virtual_entropy: float = 0.0  # each ray's opacity is 0 or 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -93,6 +94,10 @@ class RadianceModel(nn.Module):
     def make_optimizer(self) -> torch.optim.Optimizer:
         """The optimizer the trainer steps; its groups' `lr` are the initial learning rates."""
         raise NotImplementedError
+
+    def finish_training(self, training_rays: Iterable[tuple[torch.Tensor, torch.Tensor]]) -> None:
+        """Called once when a fit's budget is spent, with every training ray as chunks of
+        (origins (R, 3), directions (R, 3)): a model may tidy what the photos leave free."""
 
 
 MODELS = {

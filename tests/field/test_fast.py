@@ -243,3 +243,39 @@ def test_the_feature_total_variation_leaves_the_colours_alone_and_trains_the_fea
     out.aux["tv_features"].backward()
     assert float(model.feature_grid.values.grad.coalesce().values().abs().sum()) > 0
     assert float(model.density_grid.values.grad.coalesce().values().abs().sum()) == 0
+
+
+def test_finishing_empties_what_no_training_ray_saw_behind_a_wall():
+    # an opaque wall at x in [-0.25, 0.25] (vertices 0.125 apart) in thin fog, seen only from -x
+    # over |y|, |z| <= 0.6: one step into the wall a ray keeps a tenth of its light, so the fog in
+    # front, the wall's face and the vertex behind it (a sample reads its cell's corners) stay;
+    # from the wall's middle on, the space no ray saw is emptied, and a ray from +x, which no
+    # photo took, meets the kept face
+    model = uniform_fog(empty_unseen=0.1)
+    x = torch.linspace(-1, 1, 17)[:, None, None].expand(model.grid_shape).reshape(-1)
+    with torch.no_grad():
+        model.density_grid.values[x.abs() <= 0.25] = model._raw_at_alpha(0.9)
+        model.density_grid.values[x.abs() > 0.25] = model._raw_at_alpha(1e-3)
+    before = model.density_grid.values.detach().clone()[:, 0]
+    side = torch.linspace(-0.6, 0.6, 16)
+    y, z = torch.meshgrid(side, side, indexing="ij")
+    origins = torch.stack([torch.full_like(y, -3.0), y, z], dim=-1).reshape(-1, 3)
+    directions = torch.tensor([[1.0, 0.0, 0.0]]).expand_as(origins)
+    model.finish_training([(origins, directions)])
+    after = model.density_grid.values.detach()[:, 0]
+    middle = torch.linspace(-1, 1, 17).abs() <= 0.5
+    inner = (middle[None, :, None] & middle[None, None, :]).expand(model.grid_shape).reshape(-1)
+    assert model.training
+    torch.testing.assert_close(after[inner & (x <= -0.125)], before[inner & (x <= -0.125)])
+    assert bool((after[inner & (x >= 0)] < model._raw_at_alpha(1e-5)).all())
+    back = model.eval().render_rays(torch.tensor([[3.0, 0.1, 0.1]]),
+                                    torch.tensor([[-1.0, 0.0, 0.0]]), torch.ones(1, 3))
+    assert float(back.opacity) > 0.95
+    assert 3.0 < float(back.depth / back.opacity) < 3.25
+
+
+def test_finishing_keeps_everything_by_default():
+    model = uniform_fog()
+    before = model.density_grid.values.detach().clone()
+    model.finish_training([(torch.tensor([[-3.0, 0.0, 0.0]]), torch.tensor([[1.0, 0.0, 0.0]]))])
+    torch.testing.assert_close(model.density_grid.values.detach(), before)

@@ -28,7 +28,8 @@ from windowshop.field import kernels
 from windowshop.field.occupancy import OccupancyGrid, any_of_corners, ray_box
 from windowshop.field.optim import GridAdam
 from windowshop.model import Bounds, RadianceModel, RenderOutput
-from windowshop.render.packed import packed_distortion, ray_weights, sample_points
+from windowshop.render.packed import (arrival_transmittance, packed_distortion, ray_weights,
+                                      sample_points)
 
 EMPTY_ALPHA = 1e-6  # opacity of one final step that carved space starts at (next to none)
 DEFAULT_VOXELS = 64**3  # without a scene to size the grid by (FastModel.for_scene)
@@ -361,6 +362,30 @@ class FastModel(RadianceModel):
         # a vertex touches the cells on either side of it along each axis
         near = any_of_corners(F.pad(inside, (1, 1, 1, 1, 1, 1)))
         self.density_grid.values[~near.view(-1)] = self._raw_at_alpha(EMPTY_ALPHA)
+
+    @torch.no_grad()
+    def finish_training(self, training_rays) -> None:
+        """Empty the space no training ray reached with `empty_unseen` transmittance or more: each
+        sample's arrival transmittance goes to its nearest vertex (the highest wins), and a vertex
+        is kept when it or a neighbour was seen (a sample reads its cell's 8 corners)."""
+        if self.config.empty_unseen <= 0:
+            return
+        was_training = self.training
+        self.eval()  # the render's own samples: no jitter
+        shape = self.grid_shape
+        seen = torch.zeros(shape, device=self.density_grid.values.device)
+        last = torch.tensor(shape, device=seen.device) - 1
+        for origins, directions in training_rays:
+            t, weights, ray, *_ = self._march_and_weigh(origins, directions, {})
+            points = sample_points(origins, directions, t, ray)
+            vertex = torch.minimum(self.density_grid.to_grid(points).round().long().clamp(min=0), last)
+            flat = (vertex[:, 0] * shape[1] + vertex[:, 1]) * shape[2] + vertex[:, 2]
+            arrival = arrival_transmittance(weights, torch.bincount(ray, minlength=origins.shape[0]))
+            seen.view(-1).scatter_reduce_(0, flat, arrival, reduce="amax")
+        near_seen = F.max_pool3d((seen >= self.config.empty_unseen)[None, None].float(), 3, 1, 1)[0, 0]
+        self.density_grid.values[near_seen.view(-1) == 0] = self._raw_at_alpha(EMPTY_ALPHA)
+        self.refresh_occupancy()
+        self.train(was_training)
 
     @torch.no_grad()
     def refresh_occupancy(self) -> None:

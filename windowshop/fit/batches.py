@@ -7,11 +7,13 @@ Only the pixel colours live in memory; a batch's rays are computed from its pixe
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from windowshop.memory import spans
 from windowshop.rays import pixel_directions, rays_from_directions
 from windowshop.scene.types import Camera, View
 
@@ -81,6 +83,11 @@ class PixelBank:
         alpha = None if self.alpha is None else self.alpha[index]
         return RayBatch(origins=origins, directions=directions, rgb=self.rgb[index], alpha=alpha,
                         over=self.over)
+
+    def chunks(self, bytes_per_ray: float, budget: int) -> Iterator[RayBatch]:
+        """Every pixel's ray in order, in chunks of rays that each take at most `budget` bytes."""
+        for span in spans(len(self), bytes_per_ray, budget):
+            yield self.rays(torch.arange(span.start, span.stop, device=self.device))
 
     def sample(self, n: int) -> RayBatch:
         """`n` rays through pixels drawn without replacement, pass by pass: each pass over the

@@ -133,6 +133,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
     write_config(out_dir, model_name, model_config, budget, run.record)
     try:
         _train(run, bank, background, show_progress)
+        finish(run, bank)
     except FitCancelled:
         run.checkpoint()
         raise
@@ -147,6 +148,12 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
                "stopped_by_passes": budget.iters != fit_config.iters and progress.step >= budget.iters}
     write_metrics(out_dir, metrics)
     return metrics
+
+
+def finish(run: TrainingRun, bank: PixelBank) -> None:
+    """The budget is spent: the model may tidy its field, given every training ray."""
+    rays = bank.chunks(run.model.bytes_per_ray(training=False), run.config.memory_budget)
+    run.model.finish_training((r.origins, r.directions) for r in rays)
 
 
 def _restore(model: RadianceModel, optimizer: torch.optim.Optimizer, run_dir: str | Path) -> Progress:

@@ -32,6 +32,12 @@ def _exclusive_segment_cumsum(values: torch.Tensor, counts: torch.Tensor) -> tor
     return before
 
 
+def arrival_transmittance(weights: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
+    """The transmittance (S,) each packed sample is reached with: one minus the compositing
+    `weights` (S,) of the earlier samples of its ray (`counts` (R,) samples a ray)."""
+    return (1.0 - _exclusive_segment_cumsum(weights, counts)).to(weights.dtype)
+
+
 def packed_weights(sigma: torch.Tensor, dt: torch.Tensor | float, ray: torch.Tensor,
                    counts: torch.Tensor) -> torch.Tensor:
     """Compositing weights (S,) of densities `sigma` (S,) over intervals `dt` (S,) or a scalar.

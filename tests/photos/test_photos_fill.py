@@ -35,13 +35,26 @@ def _essential(w2c1: np.ndarray, w2c2: np.ndarray) -> np.ndarray:
     return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ rot
 
 
+def _camera() -> pycolmap.Camera:
+    return pycolmap.Camera(model="SIMPLE_PINHOLE", width=WIDTH, height=HEIGHT,
+                           params=[FOCAL, WIDTH / 2, HEIGHT / 2], camera_id=1)
+
+
+def _verified(matches: np.ndarray) -> pycolmap.TwoViewGeometry:
+    """The calibrated geometry of photos 0 and PAIRED with inlier `matches` (M, 2)."""
+    geometry = pycolmap.TwoViewGeometry()
+    geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+    geometry.E = _essential(_w2c(0), _w2c(PAIRED))
+    geometry.inlier_matches = matches
+    return geometry
+
+
 def _scene(tmp_path):
     """(model with photos PLACED and their points, database, image names in shooting order)."""
     rng = np.random.default_rng(0)
     seen = rng.uniform(-1, 1, (200, 3))  # the model's points
     unseen = rng.uniform(-1, 1, (60, 3))  # points only photos 0 and PAIRED see
-    camera = pycolmap.Camera(model="SIMPLE_PINHOLE", width=WIDTH, height=HEIGHT,
-                             params=[FOCAL, WIDTH / 2, HEIGHT / 2], camera_id=1)
+    camera = _camera()
     model = pycolmap.Reconstruction()
     model.add_camera_with_trivial_rig(camera)
     names = [f"{i:02d}.jpg" for i in range(COUNT)]
@@ -62,12 +75,8 @@ def _scene(tmp_path):
         same = np.stack([np.arange(len(seen))] * 2, axis=1)
         for i in PLACED:
             db.write_matches(i + 1, PNP + 1, same)
-        geometry = pycolmap.TwoViewGeometry()
-        geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
-        geometry.E = _essential(_w2c(0), _w2c(PAIRED))
-        geometry.inlier_matches = np.stack([np.arange(len(seen), len(seen) + len(unseen))] * 2,
-                                           axis=1)
-        db.write_two_view_geometry(1, PAIRED + 1, geometry)
+        db.write_two_view_geometry(1, PAIRED + 1, _verified(np.stack(
+            [np.arange(len(seen), len(seen) + len(unseen))] * 2, axis=1)))
     for k, xyz in enumerate(seen):
         track = pycolmap.Track()
         for i in PLACED:
@@ -125,8 +134,7 @@ def test_a_pairs_pose_reads_each_match_by_its_own_features(tmp_path, seed):
     rng = np.random.default_rng(seed)
     shared, own = rng.uniform(-1, 1, (40, 3)), rng.uniform(-1, 1, (100, 3))
     order = rng.permutation(len(shared))  # photo 7's shared feature k shows point order[k]
-    camera = pycolmap.Camera(model="SIMPLE_PINHOLE", width=WIDTH, height=HEIGHT,
-                             params=[FOCAL, WIDTH / 2, HEIGHT / 2], camera_id=1)
+    camera = _camera()
     database = tmp_path / "database.db"
     with pycolmap.Database.open(database) as db:
         db.write_camera(camera, use_camera_id=True)
@@ -137,11 +145,8 @@ def test_a_pairs_pose_reads_each_match_by_its_own_features(tmp_path, seed):
                                           image_id=image_id), use_image_id=True)
             db.write_keypoints(image_id, np.hstack([keypoints, np.zeros((len(points), 4))])
                                .astype(np.float32))
-        geometry = pycolmap.TwoViewGeometry()
-        geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
-        geometry.E = _essential(_w2c(0), _w2c(PAIRED))
-        geometry.inlier_matches = len(own) + np.stack([order, np.arange(len(shared))], axis=1)
-        db.write_two_view_geometry(1, 2, geometry)
+        db.write_two_view_geometry(1, 2, _verified(
+            len(own) + np.stack([order, np.arange(len(shared))], axis=1)))
         rotation, direction, inliers = fill._relative(db, 1, 2, (camera, camera))
     first, second = _w2c(0), _w2c(PAIRED)
     truth = second[:, :3] @ first[:, :3].T  # photo 7's camera from photo 0's

@@ -18,7 +18,8 @@ import math
 import shutil
 import sys
 import tempfile
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,9 @@ import numpy as np
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
-from windowshop.photos import matting_rembg, objectbox, output, plane, report, segment
+from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
+                               segment)
+from windowshop.photos.verify import upright
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
 from windowshop.photos.pairs import MATCHERS
@@ -40,7 +43,7 @@ BACKGROUND_GROW = 0.2  # ... and sparse points this share of the box size outsid
 MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
 # Share of the "prepare" progress each stage covers (retries add time but no progress).
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
-          "matching": 0.2, "placing cameras": 0.25, "finding the object": 0.05,
+          "matching": 0.2, "placing cameras": 0.25, "finding and checking the object": 0.05,
           "writing the scene": 0.1}
 OUTPUTS = ("transforms.json", "report.json", "cameras.png", "images", "masks", "colmap")
 
@@ -64,6 +67,9 @@ class Located:
     mask_kind: str  # "segmented" (GrabCut), "colour" (plain background), "rembg" or "none"
     background: str
     plane: plane.Plane | None  # the support plane, COLMAP frame
+    # the masks before they were cut to each other's visual hull (the verifier compares them)
+    raw_masks: dict[str, np.ndarray] = field(default_factory=dict)
+    up_source: str = "plane"  # "plane" (its normal), "photos" (their level) or "cameras"
 
 
 def check_out_dir(source: Path, out_dir: Path, overwrite: bool) -> None:
@@ -172,9 +178,10 @@ def _labels(points: np.ndarray, ids: np.ndarray, isolated: plane.Isolated,
 
 
 def find_masks(views: list[segment.View], search: np.ndarray, matting: str
-               ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None]:
+               ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None, dict[str, np.ndarray]]:
     """(photo name -> (H, W) bool mask, how they were made: "rembg", "colour" or "segmented",
-    the object's box (2, 3) from the masks' visual hull, or None) for an object in `search`.
+    the object's box (2, 3) from the masks' visual hull, or None, the masks before that hull cut
+    them) for an object in `search`.
 
     A learned matting backend when asked for; else colour on a plain background; else GrabCut
     seeded by the object's points. All are made consistent across views (segment.consistent).
@@ -190,7 +197,8 @@ def find_masks(views: list[segment.View], search: np.ndarray, matting: str
     else:
         masks, kind = segment.segment(views, search), "segmented"
     final, box = segment.consistent(masks, [v.camera for v in views], search)
-    return {v.name: m for v, m in zip(views, final)}, kind, box
+    return ({v.name: m for v, m in zip(views, final)}, kind, box,
+            {v.name: m for v, m in zip(views, masks)})
 
 
 def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
@@ -203,25 +211,35 @@ def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
     return search
 
 
-def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions) -> Located:
+def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions,
+           up: str = "plane") -> Located:
     """Support plane, up, object box, normalisation and masks for a reconstruction; `pixels` by
-    image file name. UserError when no object stands out (plane.isolate)."""
+    image file name. `up`: "plane" (the support plane's normal, else the cameras') or "photos"
+    (the direction their level right axes agree on; the plane then bounds nothing). UserError
+    when no object stands out (plane.isolate), or the photos agree on no up when asked for it."""
     posed = output.posed_photos(sfm.reconstruction)
     cameras = [p.camera for p in posed]
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
     isolated = plane.isolate(points, cameras, options.seed)
+    up_source = "plane" if isolated.plane is not None else "cameras"
+    floor = isolated.plane
+    if up == "photos":
+        level = upright.leveled(np.stack([c.c2w for c in cameras]))
+        if level is None:
+            raise UserError("the photos do not agree on which way is up (taken at many rolls)")
+        isolated, up_source, floor = replace(isolated, up=level), "photos", None
     rotation = normalize.rotation_to_z(isolated.up)
     lo, hi = objectbox.object_box(points[isolated.index], cameras, rotation)
-    if isolated.plane is not None:  # the object stands on the plane: the box's floor
-        lo[2] = isolated.plane.offset + isolated.plane.tolerance
+    if floor is not None:  # the object stands on the plane: the box's floor
+        lo[2] = floor.offset + floor.tolerance
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
-    found, kind = {}, "none"
+    found, kind, raw = {}, "none", {}
     if options.masks:
-        search = _search_box(aabb, floor=isolated.plane is not None)
+        search = _search_box(aabb, floor=floor is not None)
         views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
-        found, kind, box = find_masks(views, search, options.matting)
+        found, kind, box, raw = find_masks(views, search, options.matting)
         if box is not None:  # the masks' hull bounds the object better than its points
             refit, aabb = normalize.similarity(np.eye(3), *box)
             posed, transform = output.normalised(posed, refit), refit @ transform
@@ -229,7 +247,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     # with masks the model learns the object alone, over random backgrounds (Scene "alpha")
     return Located(photos=posed, transform=transform, aabb=aabb, points=chosen, masks=found,
                    mask_kind=kind, background="alpha" if found else "white",
-                   plane=isolated.plane)
+                   plane=isolated.plane, raw_masks=raw, up_source=up_source)
 
 
 def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,
@@ -279,6 +297,33 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     }
 
 
+def _choose(sfm: SfmResult, photos: list[Photo], work: Path, inputs: Inputs,
+            options: PrepareOptions, shown: dict[str, str]) -> hypotheses.Choice:
+    """The verified hypothesis of the scene (windowshop.photos.hypotheses), its object found;
+    UserError with what was wrong when none passes, unless `options.force`."""
+    search = hypotheses.Search(
+        image_dir=work / "images", work=work, names=[f"{p.name}.jpg" for p in photos],
+        pixels={f"{p.name}.jpg": p.pixels for p in photos}, options=options,
+        settings=_settings(inputs, photos, options), locate=locate,
+        check_placed=lambda result: check_placed(result, len(photos), shown),
+        deadline=time.perf_counter() + options.verify_seconds)
+    choice = hypotheses.choose(search, sfm)
+    if not choice.verified and not options.force:
+        raise UserError(hypotheses.refusal(choice))
+    chosen = choice.chosen.hypothesis
+    if chosen.found is None:  # forced past failed poses: the object is still needed
+        chosen.found = locate(chosen.sfm, search.pixels, options, chosen.up)
+    return choice
+
+
+def _verification(choice: hypotheses.Choice, forced: bool) -> dict:
+    """report.json's account of the checks: each hypothesis tried, and the one delivered."""
+    return {"verified": choice.verified, "forced": forced and not choice.verified,
+            "chosen": choice.chosen.hypothesis.label,
+            "seconds": round(sum(t.hypothesis.seconds for t in choice.tried), 2),
+            "tried": [t.as_report() for t in choice.tried]}
+
+
 def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = PrepareOptions(),
             on_stage: StageCallback | None = None, show: bool = True) -> PrepareResult:
     """Pose the photos or video at `source` into a scene folder `out_dir` (see module docstring).
@@ -299,12 +344,15 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
             output.write_image(work, photo.name, photo.pixels)
         names = [f"{p.name}.jpg" for p in photos]
         sfm = reconstruct(image_dir, names, work, _settings(inputs, photos, options), stages)
-        check_placed(sfm, len(photos), {f"{p.name}.jpg": _shown(p) for p in photos})
-        with stages.stage("finding the object"):
-            found = locate(sfm, {f"{p.name}.jpg": p.pixels for p in photos}, options)
+        shown = {f"{p.name}.jpg": _shown(p) for p in photos}
+        check_placed(sfm, len(photos), shown)
+        with stages.stage("finding and checking the object"):
+            choice = _choose(sfm, photos, work, inputs, options, shown)
+        sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
         with stages.stage("writing the scene", len(found.photos)) as advance:
             transforms = _write(out_dir, image_dir, sfm, found, source, advance)
         summary = _report(source, inputs, photos, dropped, sfm, found, stages)
+        summary["verification"] = _verification(choice, options.force)
     report.write_report(out_dir, summary)
     if show:
         print("\n".join(report.summary_lines(summary) + [f"scene written to {out_dir}"]),

@@ -1,0 +1,196 @@
+"""Hypotheses of a posed scene, a verifier (windowshop.photos.verify) and a choice.
+
+Structure from motion gives one model; prepare no longer trusts it blindly. The model is
+verified; while it fails, the strategies below make other hypotheses from the best one so far,
+cheapest first, each verified in turn, until one passes or the time limit
+(`PrepareOptions.verify_seconds`) is spent:
+
+    photos' up        the upright check failed: up from the photos' level instead of the plane
+    pruned            the pairs check failed: the contradicting pairs' matches dropped (the
+                      doppelganger pairs, Cui & Tan 2015), mapped again
+    global            the same matches through pycolmap's global mapper (rotation averaging)
+    without suspects  the photos the checks blame left out, to be reshot
+
+The first that passes is kept; when none does, the best-ranked one is kept only under
+`--force` (and marked unverified), otherwise prepare fails with what was wrong and what to
+reshoot. Each strategy is one function `(Search, Hypothesis, Verdict) -> Hypothesis | None`.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import pycolmap
+
+from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
+from windowshop.photos import sfm as sfm_
+from windowshop.photos.verify import Check, Hypothesis, Verdict, verify
+from windowshop.photos.verify.pairs import CONFLICT_DEG, disagreements, strong_pairs
+
+
+@dataclass
+class Search:
+    """What the strategies work with."""
+
+    image_dir: Path
+    work: Path  # scratch
+    names: list[str]  # image file names, shooting order
+    pixels: dict[str, object]  # image file name -> (H, W, 3) uint8
+    options: PrepareOptions
+    settings: sfm_.SfmSettings
+    locate: Callable  # prepare.locate(sfm, pixels, options, up=...)
+    check_placed: Callable  # (SfmResult) -> None, UserError when too few are placed
+    deadline: float  # time.perf_counter() by which no new strategy starts
+
+
+@dataclass
+class Tried:
+    hypothesis: Hypothesis
+    verdict: Verdict
+
+    def as_report(self) -> dict:
+        return {"label": self.hypothesis.label, "passed": self.verdict.passed,
+                "placed": len(self.hypothesis.sfm.placed),
+                "seconds": round(self.hypothesis.seconds, 2),
+                "checks": self.verdict.as_report()}
+
+
+@dataclass
+class Choice:
+    chosen: Tried
+    tried: list[Tried] = field(default_factory=list)
+
+    @property
+    def verified(self) -> bool:
+        return self.chosen.verdict.passed
+
+
+def evaluate(search: Search, hypothesis: Hypothesis) -> Verdict:
+    """Verify the poses; if they pass, find the object (prepare.locate) and verify the scene.
+    A failure to find the object, or too few photos placed, is a failed check of its own."""
+    start = time.perf_counter()
+    verdict = verify(hypothesis)
+    if verdict.passed:
+        try:
+            search.check_placed(hypothesis.sfm)
+            hypothesis.found = search.locate(hypothesis.sfm, search.pixels, search.options,
+                                             hypothesis.up)
+            verdict = verify(hypothesis)
+        except UserError as err:
+            verdict.checks.append(Check("object", 0.0, 1.0, str(err)))
+    hypothesis.seconds += time.perf_counter() - start
+    return verdict
+
+
+def photos_up(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    if not any(c.name == "upright" for c in verdict.failed):
+        return None
+    return Hypothesis(f"photos' up ({best.label})", best.sfm, up="photos")
+
+
+def _remapped(search: Search, label: str, database: Path, mapper: str) -> sfm_.SfmResult | None:
+    """A new SfmResult from `database`'s matches by the incremental ("relaxed") or global mapper."""
+    out = search.work / f"sparse_{label}"
+    out.mkdir(parents=True, exist_ok=True)
+    if mapper == "global":
+        options = pycolmap.GlobalPipelineOptions()
+        options.random_seed = search.settings.seed
+        models = pycolmap.global_mapping(database, search.image_dir, out, options)
+        model = max(models.values(), key=lambda r: r.num_reg_images()) if models else None
+    else:
+        model = sfm_.map_once(database, search.image_dir, out, search.settings, True,
+                              lambda n: None)
+    if model is None:
+        return None
+    placed = sorted(im.name for im in model.images.values() if im.has_pose)
+    with pycolmap.Database.open(database) as db:
+        keypoints = {im.name: db.num_keypoints_for_image(im.image_id)
+                     for im in db.read_all_images()}
+    return sfm_.SfmResult(reconstruction=model, placed=placed,
+                          unplaced=sorted(set(search.names) - set(placed)), keypoints=keypoints,
+                          database=database)
+
+
+def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
+    """A copy of the best hypothesis's database without the pairs that contradict its model."""
+    conflicts = [p for p, d in disagreements(best.sfm.reconstruction,
+                                             strong_pairs(best.sfm.database)) if d > CONFLICT_DEG]
+    if not conflicts:
+        return None
+    copy = search.work / f"database_pruned_{len(list(search.work.glob('database_pruned_*')))}.db"
+    shutil.copyfile(best.sfm.database, copy)
+    with pycolmap.Database.open(copy) as db:
+        ids = {im.name: im.image_id for im in db.read_all_images()}
+        for pair in conflicts:
+            db.delete_two_view_geometry(ids[pair.first], ids[pair.second])
+    return copy
+
+
+def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    if not any(c.name == "pairs" for c in verdict.failed):
+        return None
+    database = _pruned_database(search, best)
+    result = None if database is None else _remapped(search, "pruned", database, "incremental")
+    return None if result is None else Hypothesis("pruned", result)
+
+
+def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    if not any(c.name == "pairs" for c in verdict.failed):
+        return None
+    database = _pruned_database(search, best) or best.sfm.database
+    result = _remapped(search, "global", database, "global")
+    return None if result is None else Hypothesis("global", result)
+
+
+def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    suspects = verdict.suspects & set(best.sfm.placed)
+    if not suspects or len(suspects) == len(best.sfm.placed):
+        return None
+    model = pycolmap.Reconstruction(best.sfm.reconstruction)
+    for image in model.images.values():
+        if image.name in suspects:
+            model.deregister_frame(image.frame_id)
+    placed = sorted(set(best.sfm.placed) - suspects)
+    result = replace(best.sfm, reconstruction=model, placed=placed,
+                     unplaced=sorted(set(best.sfm.unplaced) | suspects),
+                     guessed=[n for n in best.sfm.guessed if n not in suspects])
+    return Hypothesis(f"without suspects ({best.label})", result, up=best.up)
+
+
+STRATEGIES = (photos_up, pruned, global_mapper, without_suspects)
+
+
+def choose(search: Search, first: sfm_.SfmResult) -> Choice:
+    """The first hypothesis to pass the verifier (module docstring), else the best-ranked."""
+    hypothesis = Hypothesis("as mapped", first)
+    tried = [Tried(hypothesis, evaluate(search, hypothesis))]
+    for strategy in STRATEGIES:
+        best = max(tried, key=lambda t: t.verdict.rank())
+        if best.verdict.passed or time.perf_counter() > search.deadline:
+            break
+        start = time.perf_counter()
+        made = strategy(search, best.hypothesis, best.verdict)
+        if made is None:
+            continue
+        made.seconds = time.perf_counter() - start
+        tried.append(Tried(made, evaluate(search, made)))
+    best = next((t for t in tried if t.verdict.passed), None)
+    return Choice(best or max(tried, key=lambda t: t.verdict.rank()), tried)
+
+
+def refusal(choice: Choice) -> str:
+    """What prepare says when no hypothesis passed: what was wrong and what to do."""
+    failed = choice.chosen.verdict.failed
+    if all(c.name == "object" for c in failed):
+        return failed[0].detail  # no object found, or too few photos placed: said as it is
+    found = "; ".join(c.detail for c in failed)
+    advice = "; ".join(dict.fromkeys(c.advice for c in failed if c.advice))
+    tried = ", ".join(t.hypothesis.label for t in choice.tried)
+    return (f"the cameras could not be verified ({found})" + (f". {advice[0].upper()}{advice[1:]}"
+            if advice else "") + f". Tried: {tried}. --force delivers the best of them anyway, "
+            f"marked as unverified")

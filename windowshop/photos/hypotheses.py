@@ -46,6 +46,7 @@ class Search:
     locate: Callable  # prepare.locate(sfm, pixels, options, up=...)
     check_placed: Callable  # (SfmResult) -> None, UserError when too few are placed
     deadline: float  # time.perf_counter() by which no new strategy starts
+    evidence: Path  # the database of every verified pair, which every hypothesis is held to
 
 
 @dataclass
@@ -111,19 +112,22 @@ def _remapped(search: Search, label: str, database: Path, mapper: str) -> sfm_.S
     with pycolmap.Database.open(database) as db:
         keypoints = {im.name: db.num_keypoints_for_image(im.image_id)
                      for im in db.read_all_images()}
+    # checked against every verified pair, not only the ones it was mapped from: a model that
+    # agrees with a pruned set (a fold, once the pairs across its seam are gone) can be wrong
     return sfm_.SfmResult(reconstruction=model, placed=placed,
                           unplaced=sorted(set(search.names) - set(placed)), keypoints=keypoints,
-                          database=database)
+                          database=search.evidence)
 
 
 def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
     """A copy of the best hypothesis's database without the pairs that contradict its model."""
-    conflicts = [p for p, d in disagreements(best.sfm.reconstruction,
-                                             strong_pairs(best.sfm.database)) if d > CONFLICT_DEG]
+    model = best.sfm.reconstruction
+    conflicts = [p for p, d in disagreements(model, strong_pairs(model, best.sfm.database))
+                 if d > CONFLICT_DEG]
     if not conflicts:
         return None
     copy = search.work / f"database_pruned_{len(list(search.work.glob('database_pruned_*')))}.db"
-    shutil.copyfile(best.sfm.database, copy)
+    shutil.copyfile(search.evidence, copy)
     with pycolmap.Database.open(copy) as db:
         ids = {im.name: im.image_id for im in db.read_all_images()}
         for pair in conflicts:
@@ -142,7 +146,7 @@ def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | N
 def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
     if not any(c.name == "pairs" for c in verdict.failed):
         return None
-    database = _pruned_database(search, best) or best.sfm.database
+    database = _pruned_database(search, best) or search.evidence
     result = _remapped(search, "global", database, "global")
     return None if result is None else Hypothesis("global", result)
 

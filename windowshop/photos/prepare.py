@@ -306,7 +306,7 @@ def _choose(sfm: SfmResult, photos: list[Photo], work: Path, inputs: Inputs,
         pixels={f"{p.name}.jpg": p.pixels for p in photos}, options=options,
         settings=_settings(inputs, photos, options), locate=locate,
         check_placed=lambda result: check_placed(result, len(photos), shown),
-        deadline=time.perf_counter() + options.verify_seconds)
+        deadline=time.perf_counter() + options.verify_seconds, evidence=sfm.database)
     choice = hypotheses.choose(search, sfm)
     if not choice.verified and not options.force:
         raise UserError(hypotheses.refusal(choice))

@@ -93,7 +93,7 @@ class SfmResult:
     # posed with the ring's help, not measured: windowshop.photos.fill's "paired" and "guessed"
     guessed: list[str] = field(default_factory=list)
     ring_method: dict[str, str] = field(default_factory=dict)  # guessed name -> how
-    database: Path | None = None  # the features and verified pairs the model was mapped from
+    database: Path | None = None  # the features and verified pairs the model is checked against
 
 
 def quiet_logging(verbose: bool) -> None:
@@ -159,8 +159,6 @@ def match(database: Path, work: Path, name_pairs: list[tuple[str, str]], setting
     # matches that stay at the same pixel belong to the camera (dust, noise of a dark backdrop,
     # a watermark), not the scene: two temple photos 225 degrees apart share 2248 of them
     verification.filter_stationary_matches = True
-    # each pair's own relative pose, which the verifier holds the model's poses to
-    verification.compute_relative_pose = True
     if wide and len({name for pair in name_pairs for name in pair}) <= WIDE_MAX_PHOTOS:
         matching.sift.max_ratio = WIDE_RATIO
         verification.min_num_inliers = WIDE_MIN_INLIERS

@@ -5,6 +5,8 @@ verified; while it fails, the strategies below make other hypotheses from the be
 cheapest first, each verified in turn, until one passes or the time limit
 (`PrepareOptions.verify_seconds`) is spent:
 
+    where they look   no object stood out among the sparse points: the object is where the
+                      photos look, found by its masks (the visual hull of GrabCut's outlines)
     photos' up        the upright check failed: up from the photos' level instead of the plane
     pruned            the pairs check failed: the contradicting pairs' matches dropped (the
                       doppelganger pairs, Cui & Tan 2015), mapped again
@@ -30,7 +32,7 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos import sfm as sfm_
 from windowshop.photos.verify import Check, Hypothesis, Verdict, verify
-from windowshop.photos.verify.pairs import CONFLICT_DEG, disagreements, strong_pairs
+from windowshop.photos.verify.pairs import disagreements, strong_pairs
 
 
 @dataclass
@@ -80,7 +82,7 @@ def evaluate(search: Search, hypothesis: Hypothesis) -> Verdict:
         try:
             search.check_placed(hypothesis.sfm)
             hypothesis.found = search.locate(hypothesis.sfm, search.pixels, search.options,
-                                             hypothesis.up)
+                                             hypothesis.up, hypothesis.by_points)
             verdict = verify(hypothesis)
         except UserError as err:
             verdict.checks.append(Check("object", 0.0, 1.0, str(err)))
@@ -91,7 +93,17 @@ def evaluate(search: Search, hypothesis: Hypothesis) -> Verdict:
 def photos_up(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
     if not any(c.name == "upright" for c in verdict.failed):
         return None
-    return Hypothesis(f"photos' up ({best.label})", best.sfm, up="photos")
+    return Hypothesis(f"photos' up ({best.label})", best.sfm, up="photos",
+                      by_points=best.by_points)
+
+
+def looked_at(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    """No object stood out among the sparse points (a plain object on a richly textured table
+    has nearly none of its own): the object is where every photo looks, found by its masks."""
+    if not any(c.name == "object" and "no object found" in c.detail for c in verdict.failed):
+        return None
+    return Hypothesis(f"where the photos look ({best.label})", best.sfm, up=best.up,
+                      by_points=False)
 
 
 def _remapped(search: Search, label: str, database: Path, mapper: str) -> sfm_.SfmResult | None:
@@ -123,7 +135,7 @@ def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
     """A copy of the best hypothesis's database without the pairs that contradict its model."""
     model = best.sfm.reconstruction
     conflicts = [p for p, d in disagreements(model, strong_pairs(model, best.sfm.database))
-                 if d > CONFLICT_DEG]
+                 if p.conflicts(d)]
     if not conflicts:
         return None
     copy = search.work / f"database_pruned_{len(list(search.work.glob('database_pruned_*')))}.db"
@@ -163,10 +175,11 @@ def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypo
     result = replace(best.sfm, reconstruction=model, placed=placed,
                      unplaced=sorted(set(best.sfm.unplaced) | suspects),
                      guessed=[n for n in best.sfm.guessed if n not in suspects])
-    return Hypothesis(f"without suspects ({best.label})", result, up=best.up)
+    return Hypothesis(f"without suspects ({best.label})", result, up=best.up,
+                      by_points=best.by_points)
 
 
-STRATEGIES = (photos_up, pruned, global_mapper, without_suspects)
+STRATEGIES = (looked_at, photos_up, pruned, global_mapper, without_suspects)
 
 
 def choose(search: Search, first: sfm_.SfmResult) -> Choice:

@@ -50,18 +50,24 @@ def object_index(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
     return near[seen_counts(points[near], cameras) >= MOST_VIEWS * len(cameras)]
 
 
-def object_box(chosen: np.ndarray, cameras: list[Camera],
-               rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def object_box(chosen: np.ndarray, cameras: list[Camera], rotation: np.ndarray,
+               support: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(lo (3,), hi (3,)) of the object in the `rotation`-ed frame, from its points `chosen` (Q, 3).
 
     The box is the 2-98 percentile range of the points, grown 5% on each side; with fewer than
-    MIN_POINTS of them, the cube around the look-at point that every view sees whole.
+    MIN_POINTS of them, where the cameras look: on a `support` plane (unit normal (3,) towards
+    the cameras, offset) below the look-at point, photos aim at the middle of what stands there,
+    so the box reaches from the plane to twice the look-at point's height, and as far to each
+    side; otherwise the cube around the look-at point that every view sees whole.
     """
     if len(chosen) >= MIN_POINTS:
         return normalize.box_of(chosen, rotation, percentile=2.0)
     target = nearest_point_to_axes(np.stack([c.c2w for c in cameras]))
-    radius = normalize.inscribed_radius(cameras, target)
     centre = rotation @ target
+    height = None if support is None else float(support[0] @ target - support[1])
+    if height is not None and height > 0:
+        return centre - height, centre + height
+    radius = normalize.inscribed_radius(cameras, target)
     return centre - radius, centre + radius
 
 

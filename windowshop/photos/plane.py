@@ -137,15 +137,19 @@ def _reaches_beyond(found: Plane, near: np.ndarray) -> bool:
     return float(np.mean(np.linalg.norm(on - centre, axis=1) > footprint)) >= BEYOND
 
 
-def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolated:
+def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
+            by_points: bool = True) -> Isolated:
     """Support plane, up and the object's points (see the module docstring) of a capture.
 
     A plane with nothing standing on it (a wall behind the object) is no support: up then
     comes from the cameras. UserError when no object stands out: nearly every point lies on one
-    surface, or too few points that most views see sit where the views meet.
+    surface, or too few points that most views see sit where the views meet. Not `by_points`
+    (a plain object on a richly textured table, whose points are nearly all the table's), the
+    object is wherever the cameras look, its points those there, however few (none: the box
+    around the look-at point that every view sees whole, objectbox.object_box).
     """
     plane = fit_support_plane(points, cameras, seed)
-    if plane is not None and plane.inlier_share >= FLAT_SHARE:
+    if by_points and plane is not None and plane.inlier_share >= FLAT_SHARE:
         raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
                         f"middle of the photos lie on one flat surface (a wall, a floor or an "
                         f"empty table); {ADVICE}")
@@ -153,11 +157,11 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Isolate
         plane = None  # photos that agree on up show a wall or an object's side, not a support
     if plane is not None:
         chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
-        if len(chosen) < MIN_OBJECT_POINTS:  # nothing stands on it: a wall behind, not a support
+        if by_points and len(chosen) < MIN_OBJECT_POINTS:  # nothing on it: a wall behind
             plane, chosen = None, None
     if plane is None:
         chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
-    if len(chosen) < MIN_OBJECT_POINTS:
+    if by_points and len(chosen) < MIN_OBJECT_POINTS:
         raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
                         f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
                         f"{ADVICE}")

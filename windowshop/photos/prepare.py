@@ -35,7 +35,9 @@ from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gathe
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
+from windowshop.rays import project
 from windowshop.scene import normalize
+from windowshop.scene.cameras import nearest_point_to_axes
 from windowshop.scene.nerfstudio import WRITER_KEY
 
 SEARCH_GROW = 0.3  # masks are sought in the points' box grown by this share of its size ...
@@ -177,6 +179,12 @@ def _labels(points: np.ndarray, ids: np.ndarray, isolated: plane.Isolated,
     return labels
 
 
+def _looked_at(views: list[segment.View]) -> list[segment.View]:
+    """The views with the point their axes meet as the object's one sure pixel."""
+    target = nearest_point_to_axes(np.stack([v.camera.c2w for v in views]))
+    return [replace(v, object_uv=project(target[None], v.camera)[0]) for v in views]
+
+
 def find_masks(views: list[segment.View], search: np.ndarray, matting: str
                ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None, dict[str, np.ndarray]]:
     """(photo name -> (H, W) bool mask, how they were made: "rembg", "colour" or "segmented",
@@ -212,16 +220,18 @@ def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
 
 
 def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions,
-           up: str = "plane") -> Located:
+           up: str = "plane", by_points: bool = True) -> Located:
     """Support plane, up, object box, normalisation and masks for a reconstruction; `pixels` by
     image file name. `up`: "plane" (the support plane's normal, else the cameras') or "photos"
-    (the direction their level right axes agree on; the plane then bounds nothing). UserError
-    when no object stands out (plane.isolate), or the photos agree on no up when asked for it."""
+    (the direction their level right axes agree on; the plane then bounds nothing). Not
+    `by_points`: the object is where the cameras look, found by its masks alone
+    (plane.isolate). UserError when no object stands out, or the photos agree on no up when
+    asked for it."""
     posed = output.posed_photos(sfm.reconstruction)
     cameras = [p.camera for p in posed]
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
-    isolated = plane.isolate(points, cameras, options.seed)
+    isolated = plane.isolate(points, cameras, options.seed, by_points)
     up_source = "plane" if isolated.plane is not None else "cameras"
     floor = isolated.plane
     if up == "photos":
@@ -230,7 +240,8 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
             raise UserError("the photos do not agree on which way is up (taken at many rolls)")
         isolated, up_source, floor = replace(isolated, up=level), "photos", None
     rotation = normalize.rotation_to_z(isolated.up)
-    lo, hi = objectbox.object_box(points[isolated.index], cameras, rotation)
+    lo, hi = objectbox.object_box(points[isolated.index], cameras, rotation,
+                                  None if floor is None else (floor.normal, floor.offset))
     if floor is not None:  # the object stands on the plane: the box's floor
         lo[2] = floor.offset + floor.tolerance
     transform, aabb = normalize.similarity(rotation, lo, hi)
@@ -239,7 +250,12 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     if options.masks:
         search = _search_box(aabb, floor=floor is not None)
         views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
+        if not by_points:  # no points of its own: it is surely where every photo looks
+            views = _looked_at(views)
         found, kind, box, raw = find_masks(views, search, options.matting)
+        if box is None and not by_points:
+            raise UserError(f"no object found where the photos look: the outlines found in "
+                            f"them do not agree on one; {plane.ADVICE}")
         if box is not None:  # the masks' hull bounds the object better than its points
             refit, aabb = normalize.similarity(np.eye(3), *box)
             posed, transform = output.normalised(posed, refit), refit @ transform

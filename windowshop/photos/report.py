@@ -43,7 +43,19 @@ def summary_lines(report: dict) -> list[str]:
         how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "
                "points above the surface it stands on", "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
-    return lines
+    return lines + _verification_lines(report.get("verification"))
+
+
+def _verification_lines(verification: dict | None) -> list[str]:
+    """What the verifier found (windowshop.photos.hypotheses): nothing when the first model
+    passed, the hypothesis kept when another did, and every failed check when forced."""
+    if not verification or len(verification["tried"]) == 1 and verification["verified"]:
+        return []
+    chosen = next(t for t in verification["tried"] if t["label"] == verification["chosen"])
+    if verification["verified"]:
+        return [f"  checked: kept {chosen['label']} (tried {len(verification['tried'])} ways)"]
+    return ["  UNVERIFIED (delivered by --force): "
+            + "; ".join(c["detail"] for c in chosen["checks"] if not c["passed"])]
 
 
 def reshoot(shown: list[str], unplaced: list[str]) -> dict[str, str]:

@@ -56,7 +56,8 @@ class Hypothesis:
     sfm: SfmResult
     found: Located | None = None
     seconds: float = 0.0  # what making and checking it cost
-    up: str = "plane"  # how prepare.locate finds up: "plane" or "photos"
+    up: str = "plane"  # how prepare.locate finds up: "plane" or "photos" ...
+    by_points: bool = True  # ... and the object: by its sparse points, or where the cameras look
 
 
 @dataclass

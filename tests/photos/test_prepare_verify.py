@@ -1,0 +1,96 @@
+"""`prepare` on rendered product captures with known cameras (windowshop.scene.products): right
+or refused with the reason, never wrong and delivered."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
+from windowshop.photos.align import pose_errors
+from windowshop.photos.prepare import prepare
+from windowshop.photos.report import summary_lines
+from windowshop.scene import read_source
+from windowshop.scene import products
+
+RIGHT_DEG = 5.0  # a delivered photo within this of the truth is right ...
+RIGHT_SHARE = 0.9  # ... and a delivered capture needs this share of its photos right
+
+
+def _delivered(scene_dir, truth_dir) -> tuple[dict, dict]:
+    """(delivered camera-to-world (4, 4) by photo stem, true ones) of a prepared scene."""
+    report = json.loads((scene_dir / "report.json").read_text())
+    stems = {v["name"]: v["photo"].rsplit("/", 1)[-1].rsplit(".", 1)[0] for v in report["views"]}
+    delivered = {stems[f.image_path.stem]: f.camera.c2w for f in read_source(scene_dir).frames}
+    truth = {f.image_path.stem: f.camera.c2w for f in read_source(truth_dir).frames}
+    return delivered, truth
+
+
+def _right_share(scene_dir, truth_dir) -> float:
+    delivered, truth = _delivered(scene_dir, truth_dir)
+    errors = pose_errors(delivered, truth)
+    return float(np.mean(errors.rotation_deg <= RIGHT_DEG)) * len(errors.names) / len(truth)
+
+
+@pytest.fixture(scope="module")
+def doppelganger(tmp_path_factory):
+    """A carton whose opposite sides carry one print, on white, 24 photos all round, prepared
+    with the defaults: (folder, the UserError or None)."""
+    root = tmp_path_factory.mktemp("doppelganger")
+    products.doppelganger_box(root / "capture", count=24, size=(480, 360))
+    try:
+        prepare(root / "capture" / "images", root / "scene", PrepareOptions(), show=False)
+    except UserError as err:
+        return root, err
+    return root, None
+
+
+def test_a_box_with_like_sides_is_right_or_refused_with_the_reason(doppelganger):
+    root, refused = doppelganger
+    if refused is None:
+        assert _right_share(root / "scene", root / "capture") >= RIGHT_SHARE
+        return
+    assert "sides look alike" in str(refused) and "--force" in str(refused)
+    # nothing a later run would take for a good scene
+    assert not (root / "scene" / "transforms.json").exists()
+
+
+def test_force_delivers_the_best_marked_unverified(doppelganger):
+    root, refused = doppelganger
+    result = prepare(root / "capture" / "images", root / "forced",
+                     PrepareOptions(force=True), show=False)
+    verification = result.report["verification"]
+    assert verification["verified"] is (refused is None)
+    assert verification["forced"] is (refused is not None)
+    if refused is not None:
+        assert any("UNVERIFIED" in line for line in summary_lines(result.report))
+        assert any(not t["passed"] for t in verification["tried"])
+
+
+@pytest.fixture(scope="module")
+def granite(tmp_path_factory):
+    """A plain figure on a granite table, 12 photos all round: nearly every sparse point lies
+    on the table."""
+    root = tmp_path_factory.mktemp("granite")
+    products.figure_on_granite(root / "capture", count=12, size=(400, 300))
+    return root, prepare(root / "capture" / "images", root / "scene", PrepareOptions(),
+                         show=False)
+
+
+def test_a_plain_object_on_a_textured_table_is_found_where_the_photos_look(granite):
+    root, result = granite
+    verification = result.report["verification"]
+    assert verification["verified"]
+    assert verification["chosen"].startswith("where the photos look")
+    assert _right_share(root / "scene", root / "capture") >= RIGHT_SHARE
+    ious = []
+    for view in result.report["views"]:
+        mask = np.asarray(Image.open(root / "scene" / "masks" / f"{view['name']}.png")) > 127
+        stem = view["photo"].rsplit("/", 1)[-1].rsplit(".", 1)[0]
+        truth = np.asarray(Image.open(root / "capture" / "masks" / f"{stem}.png")) > 127
+        ious.append((mask & truth).sum() / (mask | truth).sum())
+    assert np.mean(ious) > 0.6 and np.min(ious) > 0.3  # the figure, not the table

@@ -1,0 +1,341 @@
+"""What `windowshop prepare` does with each capture: right, refused, or wrong and delivered, as
+JSON, one line per case as it finishes and a table at the end.
+
+    python bench/bench_verify.py [--sets dtu_skull,temple] [--no-full | --no-subsets]
+        [--count 8] [--offsets 3] [--only SUBSTRING] [--extra NAME=PATH ...]
+        [--prepare KEY=VALUE ...] [--out results.json]
+
+Cases: each shared capture with all its photos ("<capture>/full"), and `--offsets` subsets of
+`--count` photos ("<capture>/8@k"): k = 0 is bench_fewphoto's own subset (farthest-point sampling
+on the published cameras' azimuth, from the photo of least azimuth; temple: every other photo of
+the ring; kermit: evenly spaced file names), k > 0 starts the sampling at the photo nearest
+k / offsets of the subset's spacing further round (temple: k = 1 the odd-indexed photos, k = 2
+the azimuth sampling; kermit: the file names shifted by k). beer_can gives prepare all its
+photos but scores, and draws subsets from, only the frames whose published pose is trustworthy
+(bench_fewphoto.beer_can). `--extra NAME=PATH` adds a capture from a folder with images/ and a
+ground-truth transforms.json (nerfstudio, OpenGL camera-to-world; a frame's file_path stem is its
+photo's stem).
+
+Each case runs the real windowshop.photos.prepare.prepare (PrepareOptions() defaults, overridden
+by `--prepare KEY=VALUE`, the value read as JSON when it parses, else as text) on a temporary
+folder of links to its photos. Outcome:
+  refused          prepare raised UserError (its message is kept);
+  right            delivered, the median error of every delivered pair's relative rotation is
+                   <= RIGHT_DEG and at least RIGHT_SHARE of the delivered (scored) photos are
+                   correct (bench_fewphoto.correct: the photo's pose within 10 degrees and 0.2 of
+                   the capture radius under the similarity the most of them agree with);
+  wrong-delivered  delivered, and not right;
+  delivered-unscored  delivered, no published poses (kermit);
+  error            prepare raised anything else (a bug; type and message kept).
+The delivered poses are transforms.json's frames, each mapped to its photo by report.json's
+"views"; report.json's "attempts" and, when present, "verification" are kept verbatim.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import tempfile
+import time
+import traceback
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import bench_fewphoto as fewphoto
+import subprocess
+from bench_fewphoto import (DATA, beer_can, correct, dtu_skull, fruit, kermit, relative_errors,
+                            spread, temple)
+from provenance import emit, machine
+
+from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
+from windowshop.photos.ingest import IMAGE_SUFFIXES
+from windowshop.photos.prepare import prepare
+
+RIGHT_DEG = 5.0  # a delivered scene is right when the median relative rotation error is at most
+RIGHT_SHARE = 0.9  # this, and at least this share of its scored photos are correct
+OUTCOMES = ("right", "refused", "wrong-delivered", "delivered-unscored", "error")
+
+
+@dataclass
+class Capture:
+    """A capture's photos, and the published poses of those that have trustworthy ones."""
+
+    name: str
+    photos: list[Path]  # every photo given to prepare for the full case
+    truth: dict[Path, np.ndarray | None]  # photo -> OpenGL c2w (4, 4) (None: no poses known)
+    subset: object = None  # (count, offset) -> list[Path], when the capture has its own rule
+
+
+@dataclass
+class Case:
+    name: str
+    capture: str
+    photos: list[Path]
+    truth: dict[str, np.ndarray] = field(default_factory=dict)  # photo stem -> c2w
+
+
+def _all(reader) -> dict[Path, np.ndarray | None]:
+    """Every photo a bench_fewphoto reader picks from (its `_pick` made to keep them all)."""
+    pick = fewphoto._pick
+    fewphoto._pick = lambda paths, c2ws, count: dict(zip(paths, c2ws))
+    try:
+        return reader(0)
+    finally:
+        fewphoto._pick = pick
+
+
+def spread_from(centres: np.ndarray, count: int, offset: int, of: int) -> list[int]:
+    """bench_fewphoto.spread, the farthest-point sampling started at the photo nearest
+    offset / of of the subset's spacing (360 / count degrees) beyond the least azimuth
+    (offset 0: spread itself)."""
+    rel = centres - centres.mean(0)
+    basis = np.linalg.svd(rel, full_matrices=False)[2][:2]
+    azimuth = np.arctan2(rel @ basis[1], rel @ basis[0])
+    first = int(np.argmin(azimuth))
+    target = azimuth[first] + offset * 2 * np.pi / count / of
+    first = int(np.argmin(np.abs(np.angle(np.exp(1j * (azimuth - target))))))
+    chosen = [first]
+    while len(chosen) < count:
+        gap = np.abs(np.angle(np.exp(1j * (azimuth[:, None] - azimuth[chosen][None]))))
+        chosen.append(int(np.argmax(gap.min(1))))
+    return sorted(chosen)
+
+
+def _images(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def _temple_subset(count: int, offset: int) -> list[Path]:
+    if offset == 0:
+        return sorted(temple(count))
+    rows = sorted(temple(len(_images(DATA / "temple_sparse"))))  # by name: the file's order
+    if offset == 1:
+        return rows[1::len(rows) // count][:count]  # the odd-indexed photos of the ring
+    truth = temple(len(rows))
+    picks = spread(np.stack([truth[p][:3, 3] for p in rows]), count)
+    return [rows[i] for i in picks]
+
+
+def _kermit_subset(count: int, offset: int) -> list[Path]:
+    files = sorted(kermit(len(sorted((DATA / "kermit").glob("*.jpg")))))
+    base = np.linspace(0, len(files) - 1, count).round().astype(int)
+    return sorted(files[(i + offset) % len(files)] for i in base)
+
+
+def shared_capture(name: str) -> Capture:
+    if name == "dtu_skull":
+        truth = _all(dtu_skull)
+        return Capture(name, sorted(truth), truth)
+    if name == "temple":
+        truth = temple(len(_images(DATA / "temple_sparse")))
+        return Capture(name, sorted(truth), truth, _temple_subset)
+    if name == "fruit":
+        truth = _all(fruit)
+        return Capture(name, sorted(truth), truth)
+    if name == "beer_can":  # all photos to prepare; only the trustworthy frames scored
+        return Capture(name, _images(DATA / "beer_can" / "images"), _all(beer_can))
+    if name == "kermit":
+        truth = kermit(len(sorted((DATA / "kermit").glob("*.jpg"))))
+        return Capture(name, sorted(truth), truth, _kermit_subset)
+    raise SystemExit(f"unknown capture {name!r}; use {', '.join(fewphoto.SETS)}")
+
+
+def extra_capture(name: str, folder: Path) -> Capture:
+    """A folder with images/ and a ground-truth nerfstudio transforms.json."""
+    meta = json.loads((folder / "transforms.json").read_text())
+    poses = {Path(f["file_path"]).stem: np.array(f["transform_matrix"], float)
+             for f in meta["frames"]}
+    photos = _images(folder / "images")
+    return Capture(name, photos, {p: poses[p.stem] for p in photos if p.stem in poses})
+
+
+def subset(capture: Capture, count: int, offset: int, of: int) -> list[Path]:
+    if capture.subset is not None:
+        return capture.subset(count, offset)
+    pool = list(capture.truth)  # the reader's order, as bench_fewphoto samples it
+    picks = spread_from(np.stack([capture.truth[p][:3, 3] for p in pool]), count, offset, of)
+    return [pool[i] for i in picks]
+
+
+def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int) -> list[Case]:
+    def case(name: str, photos: list[Path]) -> Case:
+        truth = {p.stem: c for p, c in capture.truth.items() if c is not None and p in photos}
+        return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth)
+
+    out = []
+    seen = set()
+    for k in range(offsets if subsets else 0):
+        photos = subset(capture, count, k, offsets)
+        if tuple(photos) in seen:  # a start that samples the same photos again adds nothing
+            print(f"{capture.name}/{count}@{k}: the same photos as an earlier subset; skipped",
+                  flush=True)
+            continue
+        seen.add(tuple(photos))
+        out.append(case(f"{count}@{k}", photos))
+    if full:
+        out.append(case("full", capture.photos))
+    return out
+
+
+def score(row: dict, delivered: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> None:
+    """Add to `row` the delivered photos' rotation errors, the wrong ones and the outcome."""
+    recovered = {n: c for n, c in delivered.items() if n in truth}
+    errors = relative_errors(recovered, truth)
+    right = correct(recovered, truth)
+    median = float(np.median(errors)) if len(errors) else None
+    row.update(scored=len(recovered), correct=len(right), wrong=sorted(set(recovered) - right),
+               rotation_deg_median=None if median is None else round(median, 2),
+               rotation_deg_max=round(float(errors.max()), 2) if len(errors) else None)
+    good = (median is not None and median <= RIGHT_DEG
+            and len(right) >= RIGHT_SHARE * len(recovered))
+    row["outcome"] = "right" if good else "wrong-delivered"
+
+
+def run_case(case: Case, options: PrepareOptions) -> dict:
+    """prepare on the case's photos (links in a folder of their own), classified and scored."""
+    row: dict = {"case": case.name, "given": len(case.photos)}
+    if not case.name.endswith("/full"):
+        row["photos"] = [p.name for p in case.photos]
+    with tempfile.TemporaryDirectory(prefix="bench-verify-") as tmp:
+        source, out = Path(tmp) / "photos", Path(tmp) / "scene"
+        source.mkdir()
+        for photo in case.photos:
+            (source / photo.name).symlink_to(photo.resolve())
+        start = time.perf_counter()
+        try:
+            prepare(source, out, options, show=False)
+        except UserError as err:
+            row.update(outcome="refused", message=str(err))
+        except Exception as err:  # a bug: kept, and the next case runs
+            row.update(outcome="error", message=f"{type(err).__name__}: {err}",
+                       traceback=traceback.format_exc(limit=-4))
+        row["seconds"] = round(time.perf_counter() - start, 1)
+        if "outcome" in row:
+            return row
+        report = json.loads((out / "report.json").read_text())
+        meta = json.loads((out / "transforms.json").read_text())
+    stem = {v["name"]: Path(v["photo"]).stem for v in report["views"]}
+    delivered = {stem[Path(f["file_path"]).stem]: np.array(f["transform_matrix"], float)
+                 for f in meta["frames"]}
+    given = {p.stem for p in case.photos}
+    row.update(used=report.get("used"), placed=report.get("placed"), delivered=len(delivered),
+               not_delivered=sorted(given - set(delivered)),
+               ring=sorted(report.get("estimated_from_ring", {})),
+               dropped=report.get("dropped", {}), attempts=report.get("attempts"))
+    if case.truth:
+        score(row, delivered, case.truth)
+    else:
+        row["outcome"] = "delivered-unscored"
+    if "verification" in report:
+        row["verification"] = report["verification"]
+    return row
+
+
+def _value(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def options_from(pairs: list[str]) -> PrepareOptions:
+    overrides = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep:
+            raise SystemExit(f"--prepare {pair}: give KEY=VALUE")
+        value = _value(value)
+        overrides[key.replace("-", "_")] = tuple(value) if isinstance(value, list) else value
+    known = {f.name for f in dataclasses.fields(PrepareOptions)}
+    if unknown := set(overrides) - known:
+        raise SystemExit(f"--prepare: PrepareOptions has no {', '.join(sorted(unknown))} "
+                         f"(it has {', '.join(sorted(known))})")
+    return PrepareOptions(**overrides)
+
+
+def worktree() -> list[str]:
+    """`git status --short` of the checkout: the changes beyond the commit that ran."""
+    try:
+        return subprocess.run(["git", "status", "--short"], cwd=Path(__file__).parents[1],
+                              capture_output=True, text=True, check=True).stdout.splitlines()
+    except (OSError, subprocess.CalledProcessError):
+        return []
+
+
+def _verified(row: dict) -> str:
+    found = row.get("verification")
+    if not isinstance(found, dict):
+        return "-"
+    return "forced" if found.get("forced") else "yes" if found.get("verified") else "no"
+
+
+def table(rows: dict[str, dict]) -> str:
+    lines = [f"{'case':<24} {'outcome':<19} {'deliv/used':>10} {'correct':>7} {'med rot':>8} "
+             f"{'verif':>6} {'sec':>6}  wrong / message"]
+    for name, r in rows.items():
+        shown = f"{r.get('delivered', 0)}/{r.get('used', r['given'])}"
+        median = r.get("rotation_deg_median")
+        note = (", ".join(r.get("wrong", [])) if "message" not in r
+                else r["message"].split("\n")[0][:90])
+        right = f"{r['correct']}/{r['scored']}" if "scored" in r else "-"
+        lines.append(f"{name:<24} {r['outcome']:<19} {shown:>10} {right:>7} "
+                     f"{'-' if median is None else f'{median:.2f}':>8} {_verified(r):>6} "
+                     f"{r['seconds']:>6.1f}  "
+                     f"{note}")
+    counts = Counter(r["outcome"] for r in rows.values())
+    lines.append("totals: " + " / ".join(f"{o} {counts.get(o, 0)}" for o in OUTCOMES))
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sets", default=",".join(fewphoto.SETS),
+                        help="comma list of shared captures (empty: none)")
+    parser.add_argument("--extra", action="append", default=[], metavar="NAME=PATH",
+                        help="a folder with images/ and a ground-truth transforms.json")
+    parser.add_argument("--full", action=argparse.BooleanOptionalAction, default=True,
+                        help="run each capture with all its photos")
+    parser.add_argument("--subsets", action=argparse.BooleanOptionalAction, default=True,
+                        help="run each capture's subsets of --count photos")
+    parser.add_argument("--count", type=int, default=8, help="photos in a subset")
+    parser.add_argument("--offsets", type=int, default=3, help="subsets per capture")
+    parser.add_argument("--only", default=None, help="run only cases whose name holds this")
+    parser.add_argument("--prepare", action="append", default=[], metavar="KEY=VALUE",
+                        help="PrepareOptions override, e.g. masks=false")
+    parser.add_argument("--out", default=None, help="also write the JSON here")
+    parser.add_argument("--table", default=None, metavar="JSON",
+                        help="only print the table of an earlier run's JSON")
+    args = parser.parse_args()
+    if args.table:
+        print(table(json.loads(Path(args.table).read_text())["cases"]))
+        return
+    options = options_from(args.prepare)
+    captures = [shared_capture(n) for n in args.sets.split(",") if n]
+    for extra in args.extra:
+        name, sep, path = extra.partition("=")
+        if not sep:
+            raise SystemExit(f"--extra {extra}: give NAME=PATH")
+        captures.append(extra_capture(name, Path(path)))
+    todo = [c for capture in captures
+            for c in cases(capture, args.full, args.subsets, args.count, args.offsets)]
+    todo = sorted((c for c in todo if args.only is None or args.only in c.name),
+                  key=lambda c: c.name.endswith("/full"))  # the quick subsets first
+    results = {**machine(), "worktree": worktree(), "options": dataclasses.asdict(options),
+               "right_deg": RIGHT_DEG, "right_share": RIGHT_SHARE, "cases": {}}
+    for case in todo:
+        row = run_case(case, options)
+        results["cases"][case.name] = row
+        print(json.dumps(row), flush=True)
+        if args.out:  # kept as it grows, for a run that is stopped
+            Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
+    results["totals"] = dict(Counter(r["outcome"] for r in results["cases"].values()))
+    emit(results, args.out)
+    print(table(results["cases"]), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -164,17 +164,20 @@ def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothe
 
 
 def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    suspects = verdict.suspects & set(best.sfm.placed)
-    if not suspects or len(suspects) == len(best.sfm.placed):
+    posed = set(best.sfm.placed) | set(best.sfm.guessed)
+    suspects = verdict.suspects & posed
+    if not suspects or suspects == posed:
         return None
     model = pycolmap.Reconstruction(best.sfm.reconstruction)
     for image in model.images.values():
         if image.name in suspects:
             model.deregister_frame(image.frame_id)
-    placed = sorted(set(best.sfm.placed) - suspects)
-    result = replace(best.sfm, reconstruction=model, placed=placed,
+    result = replace(best.sfm, reconstruction=model,
+                     placed=sorted(set(best.sfm.placed) - suspects),
                      unplaced=sorted(set(best.sfm.unplaced) | suspects),
-                     guessed=[n for n in best.sfm.guessed if n not in suspects])
+                     guessed=[n for n in best.sfm.guessed if n not in suspects],
+                     ring_method={n: how for n, how in best.sfm.ring_method.items()
+                                  if n not in suspects})
     return Hypothesis(f"without suspects ({best.label})", result, up=best.up,
                       by_points=best.by_points)
 

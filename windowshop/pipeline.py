@@ -134,6 +134,7 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     metrics = fit(scene, config.model, model, fit_config, work / "run", device, show_progress=show,
                   callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
+    held_out = _held_out(metrics, config.prepare.force) if scene_dir != source else None
 
     start = time.perf_counter()
     report("render", 0.0)
@@ -144,7 +145,8 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
                           on_frame=lambda k, n: report("render", k / n))
     done("render", start)
 
-    quality = quality_report(scene, metrics, rendered.path, _prepare_report(scene_dir, source))
+    quality = quality_report(scene, metrics, rendered.path, _prepare_report(scene_dir, source),
+                             held_out)
     report_path, _ = write_quality_report(out_mp4.with_name(f"{out_mp4.stem}_report.json"), quality)
 
     models = _export(work / "run", out_mp4, config, device, seconds, show) if config.models else []
@@ -158,6 +160,21 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
         names = ", ".join(p.name for p in [report_path, *models])
         print(f"wrote {out_mp4} and {names} in {sum(seconds.values()):.0f} s", file=sys.stderr)
     return result
+
+
+def _held_out(metrics: dict, force: bool) -> dict | None:
+    """The held-out check of a capture prepared here (windowshop.photos.verify.heldout), for the
+    quality report; UserError when it fails, unless `force`."""
+    from windowshop.photos.verify import heldout
+
+    check = heldout.check(metrics)
+    if check is None:
+        return None
+    if not check.passed and not force:
+        raise UserError(f"the result could not be verified: {check.detail}. "
+                        f"{check.advice[0].upper()}{check.advice[1:]}. --force delivers it "
+                        f"anyway, marked as unverified")
+    return check.as_report()
 
 
 def _export(run_dir: Path, out_mp4: Path, config: PipelineConfig, device: torch.device | str,

@@ -79,9 +79,13 @@ def _names(names: list[str]) -> str:
     return f"photo {names[0]}" if len(names) == 1 else f"photos {head} and {names[-1]}"
 
 
-def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | None) -> dict:
+def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | None,
+                   held_out: dict | None = None) -> dict:
     """The report of a capture: `prepared` is prepare's report.json (None for a posed scene),
-    `metrics` the fit's held-out metrics, `render` the turntable's summary (its path plan)."""
+    `metrics` the fit's held-out metrics, `render` the turntable's summary (its path plan),
+    `held_out` the held-out check (windowshop.photos.verify.heldout; None when not made).
+    "verified" is False when prepare's checks or the held-out one failed and --force delivered
+    it all the same (None for a posed scene, which nothing here verified)."""
     train = scene.split("train")
     centre = np.asarray(scene.aabb, dtype=float).mean(axis=0)
     azimuths, elevations = camera_angles([v.camera for v in scene.views], centre)
@@ -94,6 +98,8 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "train_photos": len(train),
         "held_out_photos": metrics.get("test_views", 0),
         "held_out_psnr": metrics.get("psnr"), "held_out_ssim": metrics.get("ssim"),
+        "held_out_psnr_aligned": metrics.get("psnr_aligned"),
+        "verified": _verified(prepared, held_out), "held_out_check": held_out,
         "azimuths": [round(float(a), 1) for a in azimuths],
         "elevations": [round(float(e), 1) for e in elevations],
         "empty_arcs": [(round(s, 1), round(e, 1)) for s, e in empty_arcs(azimuths)],
@@ -108,6 +114,13 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
     return report
 
 
+def _verified(prepared: dict | None, held_out: dict | None) -> bool | None:
+    checks = (prepared or {}).get("verification")
+    if checks is None and held_out is None:
+        return None
+    return bool((checks or {}).get("verified", True) and (held_out or {}).get("passed", True))
+
+
 def summary_lines(report: dict) -> list[str]:
     """The report for a terminal: a line of facts, the note, then each piece of advice."""
     psnr = report["held_out_psnr"]
@@ -115,6 +128,9 @@ def summary_lines(report: dict) -> list[str]:
              f"{report['covered_degrees'] or 0:.0f}° of the circle covered, held-out PSNR "
              + (f"{psnr:.1f} dB on {report['held_out_photos']} photos" if psnr is not None
                 else "n/a (no photo held out)")]
+    if report.get("verified") is False:
+        lines.append("  UNVERIFIED: delivered by --force although its checks failed "
+                     "(see the report's verification)")
     if "note" in report:
         lines.append(f"  note: {report['note']}")
     lines += [f"  advice: {tip}" for tip in report["advice"]]

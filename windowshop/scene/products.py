@@ -11,7 +11,9 @@ Cases:
 - `doppelganger_box`: a carton whose opposite sides carry the same print, on pure white, a ring
   of hand-held photos: incremental SfM tends to fold the far side onto the near one.
 - `figure_on_granite`: a smooth untextured figure on a feature-rich granite table: nearly every
-  SIFT point lies on the table, none on the object.
+  SIFT point lies on the table, none on the object. With `slope_deg` the table slopes (a statue
+  on a sloping street) while the figure stands plumb and the photos are taken level: the support
+  plane's normal is then not the true up (world +z).
 - `turned`: real photos re-shot by the same camera rotated about its centre (roll about the
   optical axis, pitch up or down): a pure rotation is an exact image warp for any scene. Each
   frame also records the true gravity direction in camera axes (`"gravity"`).
@@ -307,12 +309,16 @@ FIGURE_PARTS = [  # (kind, centre or ends, radius, albedo): ~1 unit tall, standi
 FIGURE_HEIGHT = 1.03
 
 
-def figure_mesh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices, faces, vertex colours (V, 3) float with Lambert shading baked per vertex)."""
+def figure_mesh(sink: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, faces, vertex colours (V, 3) float with Lambert shading baked per vertex).
+    `sink` > 0 extends the plinth that far below z = 0 (set into a sloping table, it then
+    reaches into the ground on the downhill side instead of floating above it)."""
     import trimesh
 
     parts = []
     for kind, where, radius, albedo in FIGURE_PARTS:
+        if sink > 0 and kind == "cylinder":
+            where = ((0, 0, -sink), where[1])
         if kind == "sphere":
             m = trimesh.creation.icosphere(subdivisions=4, radius=radius)
             m.apply_translation(where)
@@ -371,14 +377,32 @@ def granite(xy: np.ndarray, footprint: np.ndarray, seed: int = 0) -> np.ndarray:
     return colour
 
 
-def granite_scene() -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def table_tilt(slope_deg: float) -> np.ndarray:
+    """(3, 3) the table's rotation for a slope of `slope_deg`: about the world x axis through the
+    figure's foot (the origin), so the table rises towards +y; its normal is the third column."""
+    return _rot_x(slope_deg)
+
+
+def _plinth_sink(slope_deg: float) -> float:
+    """How far below z = 0 the plinth must reach to meet a table sloping by `slope_deg`."""
+    if slope_deg == 0:
+        return 0.0
+    radius = next(r for kind, _, r, _ in FIGURE_PARTS if kind == "cylinder")
+    return radius * abs(np.tan(np.radians(slope_deg))) + 0.02
+
+
+def granite_scene(slope_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(vertices, faces, vertex colours, figure face count): the figure, then the table (a square
-    grid of 2 triangles per cell at z = 0, its colour computed per pixel by `granite`)."""
-    fv, ff, fc = figure_mesh()
+    grid of 2 triangles per cell at z = 0, tilted by `table_tilt(slope_deg)` about the figure's
+    foot, its colour computed per pixel by `granite`). The figure stays vertical; on a slope its
+    plinth reaches down into the table."""
+    fv, ff, fc = figure_mesh(_plinth_sink(slope_deg))
     n = 24
     g = np.linspace(-TABLE_HALF, TABLE_HALF, n + 1)
     gx, gy = np.meshgrid(g, g, indexing="xy")
     tv = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], -1)
+    if slope_deg != 0:
+        tv = tv @ table_tilt(slope_deg).T
     idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
     a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     tf = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]) + len(fv)
@@ -386,10 +410,13 @@ def granite_scene() -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
             np.concatenate([fc, np.zeros((len(tv), 3))]), len(ff))
 
 
-def render_granite(scene: tuple, camera: Camera, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(rgb (H, W, 3) in [0, 1], figure coverage (H, W) in [0, 1]) of `granite_scene()` in
-    `camera`, antialiased; the table is lit by the same light as the figure, with a soft contact
-    shadow around the figure's base; light grey above the table's far edge."""
+def render_granite(scene: tuple, camera: Camera, seed: int = 0, slope_deg: float = 0.0
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(rgb (H, W, 3) in [0, 1], figure coverage (H, W) in [0, 1]) of `granite_scene(slope_deg)`
+    in `camera`, antialiased; the table is lit by the same light as the figure, with a soft
+    contact shadow around the figure's base; light grey above the table's far edge. The granite
+    and the shadow are laid out in the table's own coordinates, so a sloping table carries the
+    same pattern."""
     verts, faces, colours, figure_faces = scene
     big = camera.resized(camera.width * SUPERSAMPLE, camera.height * SUPERSAMPLE)
     v = torch.as_tensor(verts, dtype=torch.float64)
@@ -406,11 +433,18 @@ def render_granite(scene: tuple, camera: Camera, seed: int = 0) -> tuple[np.ndar
     tri = faces[face[table]]
     points = np.einsum("pk,pkc->pc", bary[table], verts[tri])
     depth = np.linalg.norm(points - camera.center, axis=-1)
-    slant = np.abs(camera.center[2]) / np.maximum(depth, 1e-9)  # cos of the incidence angle
+    if slope_deg == 0:
+        slant = np.abs(camera.center[2]) / np.maximum(depth, 1e-9)  # cos of the incidence angle
+        normal = np.array([0.0, 0.0, 1.0])
+    else:  # the table's own frame: its points at local z = 0
+        tilt = table_tilt(slope_deg)
+        normal = tilt[:, 2]
+        slant = np.abs((camera.center - points) @ normal) / np.maximum(depth, 1e-9)
+        points = points @ tilt
     footprint = depth / big.fx / np.sqrt(np.maximum(slant, 0.05))
     r = np.linalg.norm(points[:, :2], axis=-1)
     shadow = 1.0 - 0.45 * np.exp(-((r / 0.42) ** 2))
-    lit = lambert(np.array([[0.0, 0.0, 1.0]]))[0] * shadow
+    lit = lambert(normal[None])[0] * shadow
     rgb[table] = granite(points[:, :2], footprint, seed) * lit[:, None]
     h, w = big.height, big.width
     return _downsample(rgb.reshape(h, w, 3)), _downsample(fig.reshape(h, w).astype(np.float64))
@@ -426,13 +460,18 @@ def granite_cameras(count: int = 20, size: tuple[int, int] = (640, 480), seed: i
 
 
 def figure_on_granite(out: str | Path, count: int = 20, size: tuple[int, int] = (640, 480),
-                      seed: int = 0) -> Path:
+                      seed: int = 0, slope_deg: float = 0.0) -> Path:
     """An untextured orange and blue figure on a granite table, `count` photos of `size` (w, h)
-    all round; masks are the figure only. Returns `out`."""
-    scene = granite_scene()
+    all round; masks are the figure only. Returns `out`.
+
+    `slope_deg`: the table is tilted by that angle about a horizontal axis (world x) through the
+    figure's foot (`table_tilt`), while the figure stays vertical and the cameras level: the
+    true up is world +z (transforms.json's frame) whatever the slope, and the support plane's
+    normal is `table_tilt(slope_deg)[:, 2]`."""
+    scene = granite_scene(slope_deg)
     images, masks, cams = [], [], granite_cameras(count, size, seed)
     for cam in cams:
-        rgb, cover = render_granite(scene, cam, seed)
+        rgb, cover = render_granite(scene, cam, seed, slope_deg)
         images.append(_to_uint8(rgb))
         masks.append(cover >= 0.5)
     return write_capture(out, cams, images, masks, [f"figure_{k:03d}" for k in range(count)])

@@ -29,6 +29,26 @@ folder of links to its photos. Outcome:
   error            prepare raised anything else (a bug; type and message kept).
 The delivered poses are transforms.json's frames, each mapped to its photo by report.json's
 "views"; report.json's "attempts" and, when present, "verification" are kept verbatim.
+
+up_error_deg (every delivered case with known poses and a known true up): degrees between the
+delivered scene's up and the true up. prepare's normalised frame has up = +z; the delivered
+camera centres are aligned to the published ones by the similarity (windowshop.photos.align.umeyama)
+fitted on the correctly placed photos (all scored photos when fewer than 3 are correct), and the
+delivered +z is mapped through its rotation. The true up is:
+  shared captures  windowshop.scene.cameras.up_vector(c2ws, "level") of all the capture's
+                   published cameras (photos are taken level; for beer_can, its trustworthy
+                   frames). dtu_skull: 2.0 deg RMS roll about it, every camera 5-70 deg above
+                   the skull, and the table level in its photos: sensible (it is 28 deg from the
+                   published frame's -z; DTU's frame is the scanner's, not level). temple: not
+                   used: its photos are turned 90 deg (the temple lies sideways in them, every
+                   right axis along the published +y), so the right axes fix no horizontal
+                   plane; its true up is the published frame's +y instead, the normal of its
+                   ring of cameras (all at y = 0.14..0.18) and the temple's top in its photos;
+  --extra          with per-frame "gravity" (windowshop.scene.products.turned: the down
+                   direction in each camera's OpenGL axes): the opposite of the mean of each
+                   frame's gravity rotated into the world by its c2w; without it, world +z (the
+                   rendered windowshop.scene.products captures, whose world is z-up whatever
+                   their table's slope).
 """
 
 from __future__ import annotations
@@ -52,8 +72,10 @@ from provenance import emit, machine
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
+from windowshop.photos.align import umeyama
 from windowshop.photos.ingest import IMAGE_SUFFIXES
 from windowshop.photos.prepare import prepare
+from windowshop.scene.cameras import up_vector
 
 RIGHT_DEG = 5.0  # a delivered scene is right when the median relative rotation error is at most
 RIGHT_SHARE = 0.9  # this, and at least this share of its scored photos are correct
@@ -68,6 +90,7 @@ class Capture:
     photos: list[Path]  # every photo given to prepare for the full case
     truth: dict[Path, np.ndarray | None]  # photo -> OpenGL c2w (4, 4) (None: no poses known)
     subset: object = None  # (count, offset) -> list[Path], when the capture has its own rule
+    up: np.ndarray | None = None  # the true up (3,) in the truth's world frame, when known
 
 
 @dataclass
@@ -76,6 +99,7 @@ class Case:
     capture: str
     photos: list[Path]
     truth: dict[str, np.ndarray] = field(default_factory=dict)  # photo stem -> c2w
+    up: np.ndarray | None = None  # the true up (3,) in the truth's world frame
 
 
 def _all(reader) -> dict[Path, np.ndarray | None]:
@@ -126,31 +150,55 @@ def _kermit_subset(count: int, offset: int) -> list[Path]:
     return sorted(files[(i + offset) % len(files)] for i in base)
 
 
+def level_up(truth: dict[Path, np.ndarray | None]) -> np.ndarray | None:
+    """up_vector(c2ws, "level") of every known camera in `truth` (module docstring)."""
+    c2ws = [c for c in truth.values() if c is not None]
+    return up_vector(np.stack(c2ws), "level") if len(c2ws) >= 3 else None
+
+
+TEMPLE_UP = np.array([0.0, 1.0, 0.0])  # photos turned 90 deg: the ring's normal (docstring)
+
+
 def shared_capture(name: str) -> Capture:
     if name == "dtu_skull":
         truth = _all(dtu_skull)
-        return Capture(name, sorted(truth), truth)
+        return Capture(name, sorted(truth), truth, up=level_up(truth))
     if name == "temple":
         truth = temple(len(_images(DATA / "temple_sparse")))
-        return Capture(name, sorted(truth), truth, _temple_subset)
+        return Capture(name, sorted(truth), truth, _temple_subset, up=TEMPLE_UP)
     if name == "fruit":
         truth = _all(fruit)
-        return Capture(name, sorted(truth), truth)
+        return Capture(name, sorted(truth), truth, up=level_up(truth))
     if name == "beer_can":  # all photos to prepare; only the trustworthy frames scored
-        return Capture(name, _images(DATA / "beer_can" / "images"), _all(beer_can))
+        truth = _all(beer_can)
+        return Capture(name, _images(DATA / "beer_can" / "images"), truth, up=level_up(truth))
     if name == "kermit":
         truth = kermit(len(sorted((DATA / "kermit").glob("*.jpg"))))
         return Capture(name, sorted(truth), truth, _kermit_subset)
     raise SystemExit(f"unknown capture {name!r}; use {', '.join(fewphoto.SETS)}")
 
 
+def gravity_up(frames: list[dict]) -> np.ndarray | None:
+    """The true up of frames that record "gravity" (the down direction in the camera's OpenGL
+    axes, windowshop.scene.products.turned): the opposite of their mean gravity in the world;
+    None unless every frame has one."""
+    if not frames or not all("gravity" in f for f in frames):
+        return None
+    down = np.mean([np.array(f["transform_matrix"], float)[:3, :3] @ np.array(f["gravity"], float)
+                    for f in frames], axis=0)
+    return -down / np.linalg.norm(down)
+
+
 def extra_capture(name: str, folder: Path) -> Capture:
-    """A folder with images/ and a ground-truth nerfstudio transforms.json."""
+    """A folder with images/ and a ground-truth nerfstudio transforms.json; its true up from
+    the frames' "gravity" when they have it, else world +z (module docstring)."""
     meta = json.loads((folder / "transforms.json").read_text())
     poses = {Path(f["file_path"]).stem: np.array(f["transform_matrix"], float)
              for f in meta["frames"]}
     photos = _images(folder / "images")
-    return Capture(name, photos, {p: poses[p.stem] for p in photos if p.stem in poses})
+    up = gravity_up(meta["frames"])
+    return Capture(name, photos, {p: poses[p.stem] for p in photos if p.stem in poses},
+                   up=np.array([0.0, 0.0, 1.0]) if up is None else up)
 
 
 def subset(capture: Capture, count: int, offset: int, of: int) -> list[Path]:
@@ -164,7 +212,7 @@ def subset(capture: Capture, count: int, offset: int, of: int) -> list[Path]:
 def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int) -> list[Case]:
     def case(name: str, photos: list[Path]) -> Case:
         truth = {p.stem: c for p, c in capture.truth.items() if c is not None and p in photos}
-        return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth)
+        return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth, capture.up)
 
     out = []
     seen = set()
@@ -181,11 +229,32 @@ def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int)
     return out
 
 
-def score(row: dict, delivered: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> None:
-    """Add to `row` the delivered photos' rotation errors, the wrong ones and the outcome."""
+def up_error(recovered: dict[str, np.ndarray], truth: dict[str, np.ndarray], right: set[str],
+             up: np.ndarray) -> float | None:
+    """Degrees between the delivered up (+z of prepare's normalised frame, where `recovered`'s
+    c2ws are) and the true `up`, through the similarity aligning the correctly placed photos'
+    centres (`right`; all of `recovered` when fewer than 3) to the true ones; None when fewer
+    than 3 photos can be aligned."""
+    names = sorted(right) if len(right) >= 3 else sorted(recovered)
+    if len(names) < 3:
+        return None
+    _, rot, _ = umeyama(np.stack([recovered[n][:3, 3] for n in names]),
+                        np.stack([truth[n][:3, 3] for n in names]))
+    mapped = rot @ np.array([0.0, 0.0, 1.0])
+    cosine = mapped @ up / (np.linalg.norm(mapped) * np.linalg.norm(up))
+    return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
+
+
+def score(row: dict, delivered: dict[str, np.ndarray], truth: dict[str, np.ndarray],
+          up: np.ndarray | None = None) -> None:
+    """Add to `row` the delivered photos' rotation errors, the wrong ones, the outcome and,
+    with the true `up`, up_error_deg."""
     recovered = {n: c for n, c in delivered.items() if n in truth}
     errors = relative_errors(recovered, truth)
     right = correct(recovered, truth)
+    if up is not None:
+        error = up_error(recovered, truth, right, up)
+        row["up_error_deg"] = None if error is None else round(error, 2)
     median = float(np.median(errors)) if len(errors) else None
     row.update(scored=len(recovered), correct=len(right), wrong=sorted(set(recovered) - right),
                rotation_deg_median=None if median is None else round(median, 2),
@@ -227,7 +296,7 @@ def run_case(case: Case, options: PrepareOptions) -> dict:
                ring=sorted(report.get("estimated_from_ring", {})),
                dropped=report.get("dropped", {}), attempts=report.get("attempts"))
     if case.truth:
-        score(row, delivered, case.truth)
+        score(row, delivered, case.truth, case.up)
     else:
         row["outcome"] = "delivered-unscored"
     if "verification" in report:
@@ -275,15 +344,17 @@ def _verified(row: dict) -> str:
 
 def table(rows: dict[str, dict]) -> str:
     lines = [f"{'case':<24} {'outcome':<19} {'deliv/used':>10} {'correct':>7} {'med rot':>8} "
-             f"{'verif':>6} {'sec':>6}  wrong / message"]
+             f"{'up err':>7} {'verif':>6} {'sec':>6}  wrong / message"]
     for name, r in rows.items():
         shown = f"{r.get('delivered', 0)}/{r.get('used', r['given'])}"
         median = r.get("rotation_deg_median")
         note = (", ".join(r.get("wrong", [])) if "message" not in r
                 else r["message"].split("\n")[0][:90])
         right = f"{r['correct']}/{r['scored']}" if "scored" in r else "-"
+        up = r.get("up_error_deg")
         lines.append(f"{name:<24} {r['outcome']:<19} {shown:>10} {right:>7} "
-                     f"{'-' if median is None else f'{median:.2f}':>8} {_verified(r):>6} "
+                     f"{'-' if median is None else f'{median:.2f}':>8} "
+                     f"{'-' if up is None else f'{up:.2f}':>7} {_verified(r):>6} "
                      f"{r['seconds']:>6.1f}  "
                      f"{note}")
     counts = Counter(r["outcome"] for r in rows.values())

@@ -328,7 +328,7 @@ def _choose(sfm: SfmResult, photos: list[Photo], work: Path, inputs: Inputs,
         raise UserError(hypotheses.refusal(choice))
     chosen = choice.chosen.hypothesis
     if chosen.found is None:  # forced past failed poses: the object is still needed
-        chosen.found = locate(chosen.sfm, search.pixels, options, chosen.up)
+        chosen.found = locate(chosen.sfm, search.pixels, options, chosen.up, chosen.by_points)
     return choice
 
 

@@ -11,6 +11,8 @@ no masks to compare) in a module of its own:
                  coherence, Hernandez et al. 2007): a wrong pose carves the object away
     upright      the support plane's normal against the photos' own up (photos are taken
                  level, so their right axes are horizontal)
+    viewpoints   distinct photos, far apart in shooting order, stacked on one viewpoint (a few
+                 photos of an object whose sides look alike, folded)
 
 `verify` runs them all; windowshop.photos.hypotheses decides what to try next.
 """
@@ -76,9 +78,11 @@ class Verdict:
     def suspects(self) -> set[str]:
         return {name for c in self.failed for name in c.suspects}
 
-    def rank(self) -> tuple[int, float]:
-        """Sort key among hypotheses: fewer failed checks, then the higher summed margin."""
-        return (-len(self.failed), sum(c.score - c.threshold for c in self.checks))
+    def rank(self) -> tuple[int, int, int]:
+        """Sort key among hypotheses: fewer failed checks, then more checks made (one that got
+        as far as its object beats one that did not), then fewer photos blamed. Scores are in
+        different units (shares, degrees), so their margins are not added."""
+        return (-len(self.failed), len(self.checks), -len(self.suspects))
 
     def as_report(self) -> list[dict]:
         return [c.as_report() for c in self.checks]
@@ -86,7 +90,8 @@ class Verdict:
 
 def verify(hypothesis: Hypothesis) -> Verdict:
     """Every check that applies to `hypothesis`."""
-    from windowshop.photos.verify import pairs, silhouettes, upright
+    from windowshop.photos.verify import pairs, silhouettes, upright, viewpoints
 
-    checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check))
+    checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check,
+                                               viewpoints.check))
     return Verdict([c for c in checks if c is not None])

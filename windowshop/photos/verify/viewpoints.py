@@ -1,0 +1,49 @@
+"""Distinct photos placed at one viewpoint: two photos that the model puts within a few degrees
+of each other, seen from the object, yet far apart in shooting order.
+
+A seller takes photo after photo walking round; two shots from one spot are a burst (next to
+each other in order) or a duplicate (dropped when read). Photos from opposite sides of an
+object whose sides look alike are the other case: structure from motion takes each for the
+other and stacks them on one spot (the doppelganger fold of a few wide photos, which no pair
+contradicts since every pair agrees with the fold).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from windowshop.photos.verify import Check, Hypothesis
+from windowshop.photos.verify.pairs import ALIKE
+
+SAME_DEG = 4.0  # two cameras' directions from the object this close: one viewpoint
+# Pairs of photos at one viewpoint, not next to each other in shooting order, that fail it.
+# Measured (bench/RESULTS.md, "Right or refused"): the doppelganger box's 8-photo subsets stack
+# 3-4 such pairs (0.1-3.3 degrees apart); the shared captures' subsets none (the nearest: two of
+# beer_can's photos 5.6 degrees apart); temple's ring holds one true repeat (0001 and 0011)
+MAX_STACKED = 1
+
+
+def stacked(names: list[str], centres: np.ndarray, degrees: float = SAME_DEG
+            ) -> list[tuple[str, str, float]]:
+    """(name, name, degrees) for each pair of photos whose camera `centres` (N, 3), seen from
+    the object at the origin, are within `degrees` and whose `names` (shooting order) are not
+    neighbours."""
+    directions = centres / np.linalg.norm(centres, axis=1, keepdims=True)
+    angles = np.degrees(np.arccos(np.clip(directions @ directions.T, -1.0, 1.0)))
+    order = {name: k for k, name in enumerate(sorted(names))}
+    return [(names[i], names[j], float(angles[i, j]))
+            for i in range(len(names)) for j in range(i + 1, len(names))
+            if angles[i, j] < degrees and abs(order[names[i]] - order[names[j]]) > 1]
+
+
+def check(hypothesis: Hypothesis) -> Check | None:
+    found = hypothesis.found
+    if found is None or len(found.photos) < 3:
+        return None
+    names = [p.image_name for p in found.photos]
+    pairs = stacked(names, np.stack([p.camera.center for p in found.photos]))
+    detail = (f"{len(pairs)} pairs of photos far apart in shooting order placed at one viewpoint"
+              + (": " + ", ".join(f"{a}-{b} {d:.1f} deg" for a, b, d in pairs[:5]) if pairs
+                 else ""))
+    blamed = tuple(sorted({n for a, b, _ in pairs for n in (a, b)}))
+    return Check("viewpoints", -float(len(pairs)), -float(MAX_STACKED), detail, ALIKE, blamed)

@@ -25,7 +25,8 @@ folder of links to its photos. Outcome:
                    correct (bench_fewphoto.correct: the photo's pose within 10 degrees and 0.2 of
                    the capture radius under the similarity the most of them agree with);
   wrong-delivered  delivered, and not right;
-  delivered-unscored  delivered, no published poses (kermit);
+  delivered-unscored  delivered, fewer than 3 of its photos with trustworthy published poses
+                   (kermit has none; beer_can's are trustworthy only on frames 0000-0013);
   error            prepare raised anything else (a bug; type and message kept).
 The delivered poses are transforms.json's frames, each mapped to its photo by report.json's
 "views"; report.json's "attempts" and, when present, "verification" are kept verbatim.
@@ -91,6 +92,15 @@ class Capture:
     truth: dict[Path, np.ndarray | None]  # photo -> OpenGL c2w (4, 4) (None: no poses known)
     subset: object = None  # (count, offset) -> list[Path], when the capture has its own rule
     up: np.ndarray | None = None  # the true up (3,) in the truth's world frame, when known
+    scored: object = None  # (photo) -> bool: whose published pose scores a delivered one
+
+
+# beer_can's published model is folded: in azimuth about the can, its frames 0014-0034 and
+# 0053-0070 lie 160-180 degrees from where a continuous walk puts them (this bench's full-set
+# model: 1.5 turns, 8 degrees a frame; the backgrounds agree: a railing behind frames 0000-0011
+# and 0046-0047, a wall corner behind 0020, a door behind 0026), so only the first run, before
+# the published model's first jump, scores a delivered pose (bench/RESULTS.md, "Right or refused")
+BEER_RELIABLE = 13  # frames 0000-0013
 
 
 @dataclass
@@ -169,9 +179,10 @@ def shared_capture(name: str) -> Capture:
     if name == "fruit":
         truth = _all(fruit)
         return Capture(name, sorted(truth), truth, up=level_up(truth))
-    if name == "beer_can":  # all photos to prepare; only the trustworthy frames scored
+    if name == "beer_can":  # all photos to prepare; subsets from the trustworthy frames
         truth = _all(beer_can)
-        return Capture(name, _images(DATA / "beer_can" / "images"), truth, up=level_up(truth))
+        return Capture(name, _images(DATA / "beer_can" / "images"), truth, up=level_up(truth),
+                       scored=lambda p: int(p.stem) <= BEER_RELIABLE)
     if name == "kermit":
         truth = kermit(len(sorted((DATA / "kermit").glob("*.jpg"))))
         return Capture(name, sorted(truth), truth, _kermit_subset)
@@ -211,7 +222,8 @@ def subset(capture: Capture, count: int, offset: int, of: int) -> list[Path]:
 
 def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int) -> list[Case]:
     def case(name: str, photos: list[Path]) -> Case:
-        truth = {p.stem: c for p, c in capture.truth.items() if c is not None and p in photos}
+        truth = {p.stem: c for p, c in capture.truth.items() if c is not None and p in photos
+                 and (capture.scored is None or capture.scored(p))}
         return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth, capture.up)
 
     out = []
@@ -295,9 +307,9 @@ def run_case(case: Case, options: PrepareOptions) -> dict:
                not_delivered=sorted(given - set(delivered)),
                ring=sorted(report.get("estimated_from_ring", {})),
                dropped=report.get("dropped", {}), attempts=report.get("attempts"))
-    if case.truth:
+    if len(set(delivered) & set(case.truth)) >= 3:
         score(row, delivered, case.truth, case.up)
-    else:
+    else:  # no published poses, or too few of the delivered photos have trustworthy ones
         row["outcome"] = "delivered-unscored"
     if "verification" in report:
         row["verification"] = report["verification"]

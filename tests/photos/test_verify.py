@@ -126,3 +126,18 @@ def test_silhouettes_of_right_poses_cohere_and_a_moved_camera_does_not():
     wrong = silhouettes.coherence(masks, moved, aabb)
     assert wrong[3] < silhouettes.SUSPECT_IOU < scores[3]
     assert np.delete(wrong, 3).min() > 0.7  # the others keep their agreement
+
+
+def test_photos_stacked_on_one_viewpoint_fold_but_a_second_turn_does_not():
+    from windowshop.photos.verify.viewpoints import stacked
+
+    angles = np.radians(np.arange(0, 540, 30))  # a walk of 1.5 turns, 30 degrees a photo
+    ring = np.stack([np.cos(angles), np.sin(angles), 0.3 * np.ones_like(angles)], -1) * 3.0
+    names = [f"p{k:02d}.jpg" for k in range(len(angles))]
+    assert stacked(names, ring) == []  # p00 and p12 share a viewpoint, one turn apart
+    folded = ring[:8].copy()  # 8 photos; the last four taken for the first four's side
+    folded[4:] = ring[:4] * 1.01
+    pairs = stacked(names[:8], folded)
+    assert sorted((a, b) for a, b, _ in pairs) == [
+        ("p00.jpg", "p04.jpg"), ("p01.jpg", "p05.jpg"), ("p02.jpg", "p06.jpg"),
+        ("p03.jpg", "p07.jpg")]

@@ -1,11 +1,13 @@
 """Distinct photos placed at one viewpoint: two photos that the model puts within a few degrees
-of each other, seen from the object, yet far apart in shooting order.
+of each other, seen from the object, yet far apart in shooting order, with the walk between
+them not going all the way round.
 
 A seller takes photo after photo walking round; two shots from one spot are a burst (next to
-each other in order) or a duplicate (dropped when read). Photos from opposite sides of an
-object whose sides look alike are the other case: structure from motion takes each for the
-other and stacks them on one spot (the doppelganger fold of a few wide photos, which no pair
-contradicts since every pair agrees with the fold).
+each other in order), a duplicate (dropped when read), or a second turn (the walk between them,
+in the model, goes a full circle: beer_can's video walks 1.5 turns). Photos from opposite sides
+of an object whose sides look alike are the other case: structure from motion takes each for
+the other and stacks them on one spot, and the walk in between turns back (the doppelganger
+fold of a few wide photos, which no pair contradicts since every pair agrees with the fold).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from windowshop.photos.verify import Check, Hypothesis
 from windowshop.photos.verify.pairs import ALIKE
 
 SAME_DEG = 4.0  # two cameras' directions from the object this close: one viewpoint
+ROUND_DEG = 270.0  # the walk between two photos turns this far about the object: a new turn
 # Pairs of photos at one viewpoint, not next to each other in shooting order, that fail it.
 # Measured (bench/RESULTS.md, "Right or refused"): the doppelganger box's 8-photo subsets stack
 # 3-4 such pairs (0.1-3.3 degrees apart); the shared captures' subsets none (the nearest: two of
@@ -23,17 +26,30 @@ SAME_DEG = 4.0  # two cameras' directions from the object this close: one viewpo
 MAX_STACKED = 1
 
 
+def walked(names: list[str], centres: np.ndarray) -> np.ndarray:
+    """(N,) degrees the walk has turned about the object (+z at the origin) at each photo, in
+    shooting order (sorted `names`), unwrapped: each step between neighbours the shorter way."""
+    order = np.argsort(names)
+    azimuth = np.degrees(np.arctan2(centres[order, 1], centres[order, 0]))
+    steps = (np.diff(azimuth) + 180.0) % 360.0 - 180.0
+    turned = np.empty(len(names))
+    turned[order] = np.concatenate([[0.0], np.cumsum(steps)])
+    return turned
+
+
 def stacked(names: list[str], centres: np.ndarray, degrees: float = SAME_DEG
             ) -> list[tuple[str, str, float]]:
     """(name, name, degrees) for each pair of photos whose camera `centres` (N, 3), seen from
-    the object at the origin, are within `degrees` and whose `names` (shooting order) are not
-    neighbours."""
+    the object at the origin, are within `degrees`, that are not neighbours in shooting order
+    (sorted `names`) and between which the walk does not go round (ROUND_DEG)."""
     directions = centres / np.linalg.norm(centres, axis=1, keepdims=True)
     angles = np.degrees(np.arccos(np.clip(directions @ directions.T, -1.0, 1.0)))
     order = {name: k for k, name in enumerate(sorted(names))}
+    turned = walked(names, centres)
     return [(names[i], names[j], float(angles[i, j]))
             for i in range(len(names)) for j in range(i + 1, len(names))
-            if angles[i, j] < degrees and abs(order[names[i]] - order[names[j]]) > 1]
+            if angles[i, j] < degrees and abs(order[names[i]] - order[names[j]]) > 1
+            and abs(turned[i] - turned[j]) < ROUND_DEG]
 
 
 def check(hypothesis: Hypothesis) -> Check | None:

@@ -60,6 +60,7 @@ class Tried:
         return {"label": self.hypothesis.label, "passed": self.verdict.passed,
                 "placed": len(self.hypothesis.sfm.placed),
                 "seconds": round(self.hypothesis.seconds, 2),
+                "check_seconds": round(self.hypothesis.check_seconds, 2),
                 "checks": self.verdict.as_report()}
 
 
@@ -77,16 +78,24 @@ def evaluate(search: Search, hypothesis: Hypothesis) -> Verdict:
     """Verify the poses; if they pass, find the object (prepare.locate) and verify the scene.
     A failure to find the object, or too few photos placed, is a failed check of its own."""
     start = time.perf_counter()
-    verdict = verify(hypothesis)
+    verdict = _timed(hypothesis)
     if verdict.passed:
         try:
             search.check_placed(hypothesis.sfm)
             hypothesis.found = search.locate(hypothesis.sfm, search.pixels, search.options,
                                              hypothesis.up, hypothesis.by_points)
-            verdict = verify(hypothesis)
+            verdict = _timed(hypothesis)
         except UserError as err:
             verdict.checks.append(Check("object", 0.0, 1.0, str(err)))
     hypothesis.seconds += time.perf_counter() - start
+    return verdict
+
+
+def _timed(hypothesis: Hypothesis) -> Verdict:
+    """verify(), its time added to the hypothesis's `check_seconds` (the verifier's own cost)."""
+    start = time.perf_counter()
+    verdict = verify(hypothesis)
+    hypothesis.check_seconds += time.perf_counter() - start
     return verdict
 
 

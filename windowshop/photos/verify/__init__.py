@@ -57,7 +57,8 @@ class Hypothesis:
     label: str  # the strategy that made it
     sfm: SfmResult
     found: Located | None = None
-    seconds: float = 0.0  # what making and checking it cost
+    seconds: float = 0.0  # what making and checking it cost (finding its object included) ...
+    check_seconds: float = 0.0  # ... of which the checks themselves
     up: str = "plane"  # how prepare.locate finds up: "plane" or "photos" ...
     by_points: bool = True  # ... and the object: by its sparse points, or where the cameras look
 

@@ -1,10 +1,11 @@
 """Distinct photos placed at one viewpoint: two photos that the model puts within a few degrees
-of each other, seen from the object, yet far apart in shooting order, with the walk between
-them not going all the way round.
+of each other, seen from the object, yet a quarter of the walk or more apart in shooting order,
+with the walk between them not going all the way round.
 
-A seller takes photo after photo walking round; two shots from one spot are a burst (next to
-each other in order), a duplicate (dropped when read), or a second turn (the walk between them,
-in the model, goes a full circle: beer_can's video walks 1.5 turns). Photos from opposite sides
+A seller takes photo after photo walking round; two shots from one spot are a burst or a step
+back (a few photos apart: fruit's 81 hold five such pairs, 2-10 photos apart), a duplicate
+(dropped when read), or a second turn (the walk between them, in the model, goes a full circle:
+beer_can's video walks 1.5 turns). Photos from opposite sides
 of an object whose sides look alike are the other case: structure from motion takes each for
 the other and stacks them on one spot, and the walk in between turns back (the doppelganger
 fold of a few wide photos, which no pair contradicts since every pair agrees with the fold).
@@ -19,7 +20,8 @@ from windowshop.photos.verify.pairs import ALIKE
 
 SAME_DEG = 4.0  # two cameras' directions from the object this close: one viewpoint
 ROUND_DEG = 270.0  # the walk between two photos turns this far about the object: a new turn
-# Pairs of photos at one viewpoint, not next to each other in shooting order, that fail it.
+APART_SHARE = 0.25  # photos this share of the walk or more apart in shooting order are far apart
+# Pairs of photos so stacked that fail it.
 # Measured (bench/RESULTS.md, "Right or refused"): the doppelganger box's 8-photo subsets stack
 # 3-4 such pairs (0.1-3.3 degrees apart); the shared captures' subsets none (the nearest: two of
 # beer_can's photos 5.6 degrees apart); temple's ring holds one true repeat (0001 and 0011)
@@ -40,15 +42,17 @@ def walked(names: list[str], centres: np.ndarray) -> np.ndarray:
 def stacked(names: list[str], centres: np.ndarray, degrees: float = SAME_DEG
             ) -> list[tuple[str, str, float]]:
     """(name, name, degrees) for each pair of photos whose camera `centres` (N, 3), seen from
-    the object at the origin, are within `degrees`, that are not neighbours in shooting order
-    (sorted `names`) and between which the walk does not go round (ROUND_DEG)."""
+    the object at the origin, are within `degrees`, that lie APART_SHARE of the walk or more
+    apart in shooting order (sorted `names`), and between which the walk does not go round
+    (ROUND_DEG). A fold stacks photos half a walk apart."""
     directions = centres / np.linalg.norm(centres, axis=1, keepdims=True)
     angles = np.degrees(np.arccos(np.clip(directions @ directions.T, -1.0, 1.0)))
     order = {name: k for k, name in enumerate(sorted(names))}
     turned = walked(names, centres)
     return [(names[i], names[j], float(angles[i, j]))
             for i in range(len(names)) for j in range(i + 1, len(names))
-            if angles[i, j] < degrees and abs(order[names[i]] - order[names[j]]) > 1
+            if angles[i, j] < degrees
+            and abs(order[names[i]] - order[names[j]]) >= max(2, APART_SHARE * len(names))
             and abs(turned[i] - turned[j]) < ROUND_DEG]
 
 
@@ -58,7 +62,8 @@ def check(hypothesis: Hypothesis) -> Check | None:
         return None
     names = [p.image_name for p in found.photos]
     pairs = stacked(names, np.stack([p.camera.center for p in found.photos]))
-    detail = (f"{len(pairs)} pairs of photos far apart in shooting order placed at one viewpoint"
+    detail = (f"{len(pairs)} pairs of photos far apart in shooting order placed at one "
+              f"viewpoint"
               + (": " + ", ".join(f"{a}-{b} {d:.1f} deg" for a, b, d in pairs[:5]) if pairs
                  else ""))
     blamed = tuple(sorted({n for a, b, _ in pairs for n in (a, b)}))

@@ -19,7 +19,7 @@ import shutil
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +29,13 @@ from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
                                segment)
-from windowshop.photos.verify import upright
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
+from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
+from windowshop.photos.verify import upright
 from windowshop.rays import project
 from windowshop.scene import normalize
 from windowshop.scene.cameras import nearest_point_to_axes
@@ -55,23 +56,6 @@ class PrepareResult:
     out_dir: Path
     transforms: Path
     report: dict
-
-
-@dataclass
-class Located:
-    """The object found in a reconstruction, and the normalised cameras."""
-
-    photos: list[output.PosedPhoto]  # normalised frame
-    transform: np.ndarray  # (4, 4) COLMAP frame -> normalised frame
-    aabb: np.ndarray  # (2, 3) normalised
-    points: np.ndarray  # (Q, 3) the object's sparse points, normalised
-    masks: dict[str, np.ndarray]  # photo name -> (H, W) bool; empty when none are made
-    mask_kind: str  # "segmented" (GrabCut), "colour" (plain background), "rembg" or "none"
-    background: str
-    plane: plane.Plane | None  # the support plane, COLMAP frame
-    # the masks before they were cut to each other's visual hull (the verifier compares them)
-    raw_masks: dict[str, np.ndarray] = field(default_factory=dict)
-    up_source: str = "plane"  # "plane" (its normal), "photos" (their level) or "cameras"
 
 
 def check_out_dir(source: Path, out_dir: Path, overwrite: bool) -> None:

@@ -7,7 +7,7 @@ cameras or a wrong outline (a cloud, a leaning object with the wall behind it ba
 
 from __future__ import annotations
 
-from windowshop.photos.verify import Check
+from windowshop.photos.verify.types import Check
 
 # Aligned held-out PSNR (the fit's "psnr_aligned") a delivered capture needs. Measured
 # (bench/RESULTS.md, "Right or refused"): the shared captures' right fits at the defaults reach

@@ -17,7 +17,7 @@ import numpy as np
 import pycolmap
 
 from windowshop.photos.align import rotation_angle
-from windowshop.photos.verify import Check, Hypothesis
+from windowshop.photos.verify.types import Check, Hypothesis
 
 STRONG_INLIERS = 100  # a pair with this many verified inliers measures its rotation well
 CONFLICT_DEG = 30.0  # the model and a strong pair disagree by more than this: a conflict

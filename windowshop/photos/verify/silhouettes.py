@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from windowshop.photos.segment import hull_silhouette
-from windowshop.photos.verify import Check, Hypothesis
+from windowshop.photos.verify.types import Check, Hypothesis
 from windowshop.rays import project
 from windowshop.scene.types import Camera
 

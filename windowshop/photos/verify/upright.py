@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from windowshop.photos.verify import Check, Hypothesis
+from windowshop.photos.verify.types import Check, Hypothesis
 
 LEVEL_SPREAD_DEG = 6.0  # right axes within this (RMS) of horizontal: the photos know up ...
 AGREE_DEG = 12.0  # ... and a scene up further than this from theirs fails the check

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from windowshop.photos.verify import Check, Hypothesis
+from windowshop.photos.verify.types import Check, Hypothesis
 from windowshop.photos.verify.pairs import ALIKE
 
 SAME_DEG = 4.0  # two cameras' directions from the object this close: one viewpoint

@@ -62,9 +62,27 @@ def test_without_a_plane_up_falls_back_to_the_cameras():
     for c in cameras:  # upright photos this time
         c.c2w[:] = look_at(c.center, np.array([0, 0, 0.4]), np.array([0.0, 0.0, 1.0]))
     isolated = plane.isolate(points, cameras)
-    assert isolated.plane is None
+    assert isolated.plane is None and isolated.up_source == "photos"  # level photos agree
+    assert isolated.up[2] > 0.9999 and len(isolated.index) > 0.5 * blob
+    for c, roll in zip(cameras, rng.uniform(-40, 40, len(cameras))):  # at random rolls: none
+        c.c2w[:3, :3] = c.c2w[:3, :3] @ _rotation(np.array([0.0, 0.0, 1.0]), roll)
+    isolated = plane.isolate(points, cameras)
+    assert isolated.up_source == "cameras"
     np.testing.assert_allclose(isolated.up, up_vector(np.stack([c.c2w for c in cameras])))
-    assert isolated.up[2] > 0.99 and len(isolated.index) > 0.5 * blob
+
+
+def test_a_statue_photographed_from_below_stands_up_by_the_photos_level():
+    """No support plane (a pedestal, a street), five level photos from the front looking up at
+    the object: their mean up leans back, their right axes still lie level."""
+    rng = np.random.default_rng(5)
+    blob = rng.normal(size=(400, 3)) * [0.3, 0.3, 0.8] + [0, 0, 2.0]
+    cameras = [_rolled(np.array([3 * np.sin(a), -3 * np.cos(a), 0.8]), np.array([0, 0, 2.0]),
+                       np.array([0.0, 0.0, 1.0]), 0.0) for a in np.linspace(-0.5, 0.5, 5)]
+    mean_up = up_vector(np.stack([c.c2w for c in cameras]))
+    assert np.degrees(np.arccos(mean_up[2])) > 15  # the mean up would lean the statue
+    isolated = plane.isolate(blob, cameras)
+    assert isolated.plane is None and isolated.up_source == "photos"
+    assert np.degrees(np.arccos(min(1.0, isolated.up[2]))) < 0.5
 
 
 def test_a_flat_wall_is_no_object():

@@ -14,7 +14,7 @@ from windowshop.photos.progress import Stages
 from windowshop.photos.sfm import SfmSettings, reconstruct
 from windowshop.photos.verify import Hypothesis, pairs, silhouettes, upright, verify
 from windowshop.rays import project
-from windowshop.scene.cameras import look_at
+from windowshop.scene.cameras import LEVEL_SPREAD_DEG, agreed_level, look_at, photos_level
 from windowshop.scene.types import Camera
 from shared_data import DATA
 
@@ -84,16 +84,16 @@ def _ring(count: int, up: np.ndarray, roll_deg: np.ndarray | None = None) -> lis
 def test_level_photos_give_their_up_whatever_the_world_frame():
     up = np.array([0.3, -0.5, 0.8])
     c2ws = np.stack([c.c2w for c in _ring(12, up)])
-    found, spread = upright.photos_up(c2ws)
+    found, spread = photos_level(c2ws)
     assert upright.angle(found, up) < 0.01 and spread < 0.01
-    assert upright.angle(upright.leveled(c2ws), up) < 0.01
+    assert upright.angle(agreed_level(c2ws), up) < 0.01
 
 
 def test_photos_at_random_rolls_know_no_up():
     rolls = np.random.default_rng(0).uniform(-40, 40, 12)
     c2ws = np.stack([c.c2w for c in _ring(12, np.array([0, 0, 1.0]), rolls)])
-    assert upright.photos_up(c2ws)[1] > upright.LEVEL_SPREAD_DEG
-    assert upright.leveled(c2ws) is None
+    assert photos_level(c2ws)[1] > LEVEL_SPREAD_DEG
+    assert agreed_level(c2ws) is None
 
 
 def _box_masks(cameras: list[Camera], lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:

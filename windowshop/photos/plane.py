@@ -5,7 +5,8 @@ A support plane is opaque: the cameras are all on one side of it and no point is
 beneath it; it reaches beyond the object's footprint; something stands on it. That, not the
 photos' roll, tells a table from a plane through the object itself, so "up" holds for photos
 taken at any roll. Only photos that agree on an up (upright ones) can overrule it: a plane far
-off their up is a wall. Without a support plane, up falls back to the cameras.
+off their up is a wall. Without a support plane, up is the level the photos agree on, else the
+cameras' mean up.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from windowshop.errors import UserError
 from windowshop.photos.objectbox import NEAR_TARGET, object_index
-from windowshop.scene.cameras import nearest_point_to_axes, up_vector
+from windowshop.scene.cameras import agreed_level, nearest_point_to_axes, up_vector
 from windowshop.scene.types import Camera
 
 TOLERANCE = 0.01  # inlier distance, as a share of the median camera distance to the object
@@ -59,6 +60,7 @@ class Isolated:
     plane: Plane | None
     up: np.ndarray  # (3,) unit
     index: np.ndarray  # (Q,) int: which of the points given are the object's
+    up_source: str = "plane"  # or, with no support plane, "photos" (their level) or "cameras"
 
 
 def capture_scale(cameras: list[Camera]) -> tuple[np.ndarray, float]:
@@ -165,8 +167,18 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
         raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
                         f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
                         f"{ADVICE}")
-    up = plane.normal if plane is not None else up_vector(np.stack([c.c2w for c in cameras]))
-    return Isolated(plane=plane, up=up, index=chosen)
+    if plane is not None:
+        return Isolated(plane=plane, up=plane.normal, index=chosen)
+    up, source = _cameras_up(np.stack([c.c2w for c in cameras]))
+    return Isolated(plane=None, up=up, index=chosen, up_source=source)
+
+
+def _cameras_up(c2ws: np.ndarray) -> tuple[np.ndarray, str]:
+    """(up (3,), where it came from) with no support plane: the level the photos agree on (a
+    statue on a pedestal, photographed from below: their pitch would tilt the mean up), else
+    the cameras' mean up."""
+    level = agreed_level(c2ws)
+    return (level, "photos") if level is not None else (up_vector(c2ws), "cameras")
 
 
 def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:

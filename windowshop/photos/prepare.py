@@ -35,10 +35,9 @@ from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
-from windowshop.photos.verify import upright
 from windowshop.rays import project
 from windowshop.scene import normalize
-from windowshop.scene.cameras import nearest_point_to_axes
+from windowshop.scene.cameras import agreed_level, nearest_point_to_axes
 from windowshop.scene.nerfstudio import WRITER_KEY
 
 SEARCH_GROW = 0.3  # masks are sought in the points' box grown by this share of its size ...
@@ -216,10 +215,10 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
     isolated = plane.isolate(points, cameras, options.seed, by_points)
-    up_source = "plane" if isolated.plane is not None else "cameras"
+    up_source = "plane" if isolated.plane is not None else isolated.up_source
     floor = isolated.plane
     if up == "photos":
-        level = upright.leveled(np.stack([c.c2w for c in cameras]))
+        level = agreed_level(np.stack([c.c2w for c in cameras]))
         if level is None:
             raise UserError("the photos do not agree on which way is up (taken at many rolls)")
         isolated, up_source, floor = replace(isolated, up=level), "photos", None

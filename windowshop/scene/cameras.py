@@ -117,6 +117,33 @@ def _level_up(c2ws: np.ndarray) -> np.ndarray:
     return up / np.linalg.norm(up)
 
 
+LEVEL_SPREAD_DEG = 6.0  # photos whose right axes lie within this (RMS) of one level agree on up
+
+
+def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
+    """(unit up (3,) most perpendicular to the cameras' right axes, signed like their mean up;
+    the RMS angle in degrees between the right axes and the horizontal it defines), for
+    camera-to-world matrices (N, 4, 4) with OpenGL axes."""
+    rights = c2ws[:, :3, 0]
+    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
+    up = eigvecs[:, 0]
+    if up @ c2ws[:, :3, 1].sum(0) < 0:
+        up = -up
+    spread = float(np.degrees(np.arcsin(np.sqrt(max(eigvals[0], 0.0)))))
+    return up, spread
+
+
+def agreed_level(c2ws: np.ndarray) -> np.ndarray | None:
+    """The photos' up (3,) when their right axes agree on one (spread under LEVEL_SPREAD_DEG)
+    and they turn round it (not all at one azimuth, where any up fits), else None."""
+    if len(c2ws) < 3:
+        return None
+    up, spread = photos_level(c2ws)
+    rights = c2ws[:, :3, 0]
+    turned = np.linalg.eigvalsh(rights.T @ rights / len(rights))[1] > 0.02
+    return up if spread <= LEVEL_SPREAD_DEG and turned else None
+
+
 def box_corners(aabb) -> np.ndarray:
     """The eight corners (8, 3) of the box `aabb` ((3,) min corner, (3,) max corner)."""
     lo, hi = np.asarray(aabb, dtype=np.float64)

@@ -14,36 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from windowshop.photos.verify.types import Check, Hypothesis
+from windowshop.scene.cameras import agreed_level, photos_level
 
-LEVEL_SPREAD_DEG = 6.0  # right axes within this (RMS) of horizontal: the photos know up ...
-AGREE_DEG = 12.0  # ... and a scene up further than this from theirs fails the check
-MIN_PHOTOS = 3
+AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
 ADVICE = ("the object would lean: the surface it stands on is not level in the photos; "
           "photograph it with the phone held upright, or on a level surface that shows around it")
-
-
-def photos_up(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
-    """(unit up (3,) most perpendicular to the cameras' right axes, signed like their mean up;
-    the RMS angle in degrees between the right axes and the horizontal it defines), for
-    camera-to-world matrices (N, 4, 4) with OpenGL axes."""
-    rights = c2ws[:, :3, 0]
-    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
-    up = eigvecs[:, 0]
-    if up @ c2ws[:, :3, 1].sum(0) < 0:
-        up = -up
-    spread = float(np.degrees(np.arcsin(np.sqrt(max(eigvals[0], 0.0)))))
-    return up, spread
-
-
-def leveled(c2ws: np.ndarray) -> np.ndarray | None:
-    """The photos' up (3,) when their right axes agree on one (spread under LEVEL_SPREAD_DEG)
-    and they turn round it (not all at one azimuth, where any up fits), else None."""
-    if len(c2ws) < MIN_PHOTOS:
-        return None
-    up, spread = photos_up(c2ws)
-    rights = c2ws[:, :3, 0]
-    turned = np.linalg.eigvalsh(rights.T @ rights / len(rights))[1] > 0.02
-    return up if spread <= LEVEL_SPREAD_DEG and turned else None
 
 
 def angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -57,11 +32,11 @@ def check(hypothesis: Hypothesis) -> Check | None:
     if found is None or found.up_source != "plane":
         return None  # up already comes from the photos or the cameras
     c2ws = np.stack([p.camera.c2w for p in found.photos])
-    theirs = leveled(c2ws)
+    theirs = agreed_level(c2ws)
     if theirs is None:
         return None
     off = angle(theirs, np.array([0.0, 0.0, 1.0]))  # the normalised frame's up is the plane's
     detail = (f"the support plane's up is {off:.1f} deg from the photos' own "
-              f"(their rolls spread {photos_up(c2ws)[1]:.1f} deg)")
+              f"(their rolls spread {photos_level(c2ws)[1]:.1f} deg)")
     # scored so that higher is better and the threshold is 0: AGREE_DEG minus the angle
     return Check("upright", AGREE_DEG - off, 0.0, detail, ADVICE)

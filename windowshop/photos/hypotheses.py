@@ -8,8 +8,8 @@ cheapest first, each verified in turn, until one passes or the time limit
     where they look   no object stood out among the sparse points: the object is where the
                       photos look, found by its masks (the visual hull of GrabCut's outlines)
     photos' up        the upright check failed: up from the photos' level instead of the plane
-    pruned            the pairs check failed: the contradicting pairs' matches dropped (the
-                      doppelganger pairs, Cui & Tan 2015), mapped again
+    pruned            the pairs check failed: the contradicting pairs dropped from the
+                      matches (pair pruning, as Cui & Tan 2015), mapped again
     global            the same matches through pycolmap's global mapper (rotation averaging)
     without suspects  the photos the checks blame left out, to be reshot
 

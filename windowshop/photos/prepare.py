@@ -215,8 +215,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
     isolated = plane.isolate(points, cameras, options.seed, by_points)
-    up_source = "plane" if isolated.plane is not None else isolated.up_source
-    floor = isolated.plane
+    up_source, floor = isolated.up_source, isolated.plane
     if up == "photos":
         level = agreed_level(np.stack([c.c2w for c in cameras]))
         if level is None:

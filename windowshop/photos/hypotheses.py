@@ -115,7 +115,8 @@ def looked_at(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis 
                       by_points=False)
 
 
-def _remapped(search: Search, label: str, database: Path, mapper: str) -> sfm_.SfmResult | None:
+def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapper: str
+              ) -> sfm_.SfmResult | None:
     """A new SfmResult from `database`'s matches by the incremental ("relaxed") or global mapper."""
     out = search.work / f"sparse_{label}"
     out.mkdir(parents=True, exist_ok=True)
@@ -130,13 +131,11 @@ def _remapped(search: Search, label: str, database: Path, mapper: str) -> sfm_.S
     if model is None:
         return None
     placed = sorted(im.name for im in model.images.values() if im.has_pose)
-    with pycolmap.Database.open(database) as db:
-        keypoints = {im.name: db.num_keypoints_for_image(im.image_id)
-                     for im in db.read_all_images()}
     # checked against every verified pair, not only the ones it was mapped from: a model that
     # agrees with a pruned set (a fold, once the pairs across its seam are gone) can be wrong
     return sfm_.SfmResult(reconstruction=model, placed=placed,
-                          unplaced=sorted(set(search.names) - set(placed)), keypoints=keypoints,
+                          unplaced=sorted(set(search.names) - set(placed)),
+                          keypoints=best.sfm.keypoints,  # the same features, matched again
                           database=search.evidence)
 
 
@@ -160,7 +159,7 @@ def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | N
     if not any(c.name == "pairs" for c in verdict.failed):
         return None
     database = _pruned_database(search, best)
-    result = None if database is None else _remapped(search, "pruned", database, "incremental")
+    result = None if database is None else _remapped(search, best, "pruned", database, "incremental")
     return None if result is None else Hypothesis("pruned", result)
 
 
@@ -168,7 +167,7 @@ def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothe
     if not any(c.name == "pairs" for c in verdict.failed):
         return None
     database = _pruned_database(search, best) or search.evidence
-    result = _remapped(search, "global", database, "global")
+    result = _remapped(search, best, "global", database, "global")
     return None if result is None else Hypothesis("global", result)
 
 

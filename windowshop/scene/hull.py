@@ -15,6 +15,13 @@ MASK_SIDE = 128  # masks are subsampled to about this many pixels on the longer 
 CARVE_MASK_SIDE = 512  # ... for the finer carve mask
 
 
+def cube_grid(centre: np.ndarray, half_size: float, cells: int = GRID) -> np.ndarray:
+    """(cells^3, 3) float32 centres of the voxels filling the cube `centre` +- `half_size`."""
+    axis = (np.arange(cells) + 0.5) / cells * 2.0 - 1.0
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    return (centre + half_size * grid).astype(np.float32)  # float32: half the memory traffic
+
+
 def hull_points(cameras: list[Camera], masks: list[np.ndarray], centre: np.ndarray,
                 half_size: float, tolerance: float = 0.05) -> np.ndarray | None:
     """Centres (M, 3) of the voxels inside the visual hull, or None if nothing survives.
@@ -25,9 +32,7 @@ def hull_points(cameras: list[Camera], masks: list[np.ndarray], centre: np.ndarr
     """
     step = max(1, len(cameras) // MAX_VIEWS)
     cameras, masks = cameras[::step], masks[::step]
-    axis = (np.arange(GRID) + 0.5) / GRID * 2.0 - 1.0
-    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    points = (centre + half_size * grid).astype(np.float32)  # float32: half the memory traffic
+    points = cube_grid(centre, half_size)
     misses = np.zeros(len(points), dtype=np.int32)
     allowed = int(tolerance * len(cameras))
     for cam, mask in zip(cameras, masks):
@@ -54,7 +59,7 @@ def carve_mask(cameras: list[Camera], masks: list[np.ndarray], aabb: np.ndarray,
     misses = np.zeros(len(points), dtype=np.int32)
     allowed = max(1, int(tolerance * len(cameras)))
     for cam, mask in zip(cameras, masks):
-        seen, hit = _projection(points, cam, mask, CARVE_MASK_SIDE)
+        seen, hit = projection(points, cam, mask, CARVE_MASK_SIDE)
         misses += seen & ~hit
         keep = misses <= allowed
         points, index, misses = points[keep], index[keep], misses[keep]
@@ -68,10 +73,10 @@ def carve_mask(cameras: list[Camera], masks: list[np.ndarray], aabb: np.ndarray,
 
 def _covered(points: np.ndarray, cam: Camera, mask: np.ndarray) -> np.ndarray:
     """(N,) bool: points that project in front of `cam` onto its foreground (mask (H, W))."""
-    return _projection(points, cam, mask, MASK_SIDE)[1]
+    return projection(points, cam, mask, MASK_SIDE)[1]
 
 
-def _projection(points: np.ndarray, cam: Camera, mask: np.ndarray,
+def projection(points: np.ndarray, cam: Camera, mask: np.ndarray,
                 side: int) -> tuple[np.ndarray, np.ndarray]:
     """(N,) bool each: points that project in front of `cam` inside its image, and those of them
     that land on its foreground (mask (H, W), subsampled to about `side` pixels)."""

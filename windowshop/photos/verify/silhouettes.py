@@ -13,7 +13,7 @@ import numpy as np
 
 from windowshop.photos.segment import hull_silhouette
 from windowshop.photos.verify.types import Check, Hypothesis
-from windowshop.rays import project
+from windowshop.scene.hull import cube_grid, projection
 from windowshop.scene.types import Camera
 
 GRID = 48  # voxels per side of the object's box
@@ -26,30 +26,13 @@ ADVICE = ("the object's outline in some photos does not match what the others sh
           "overlap with their neighbours")
 
 
-def _grid(aabb: np.ndarray) -> tuple[np.ndarray, float]:
-    """(voxel centres (GRID^3, 3) filling the cube around `aabb` (2, 3), the voxel side)."""
-    centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
-    axis = (np.arange(GRID) + 0.5) / GRID * 2.0 - 1.0
-    cube = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    return centre + half * cube, 2 * half / GRID
-
-
-def _seen(points: np.ndarray, camera: Camera, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((M,) bool in the photo's frame, (M,) bool in its mask) for `points` (M, 3)."""
-    uv, depth = project(points, camera)
-    h, w = mask.shape
-    u, v = np.floor(uv).astype(np.int64).T
-    inside = (depth > 0) & (u >= 0) & (v >= 0) & (u < w) & (v < h)
-    covered = np.zeros(len(points), dtype=bool)
-    covered[inside] = mask[v[inside], u[inside]]
-    return inside, covered
-
-
 def coherence(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray) -> np.ndarray:
     """(N,) each mask's (H, W) bool intersection over union with the hull of the other masks,
     projected into its camera; cameras and the box `aabb` (2, 3) in one frame."""
-    points, voxel = _grid(aabb)
-    seen = [_seen(points, c, m) for c, m in zip(cameras, masks)]
+    centre, half = aabb.mean(0), float(np.max(aabb[1] - aabb[0])) / 2
+    points, voxel = cube_grid(centre, half, GRID), 2 * half / GRID
+    # (in the photo's frame, on its mask) per voxel, at the masks' full size
+    seen = [projection(points, c, m, max(m.shape)) for c, m in zip(cameras, masks)]
     frames = np.sum([s[0] for s in seen], axis=0)
     covered = np.sum([s[1] for s in seen], axis=0)
     scores = []

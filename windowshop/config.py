@@ -193,6 +193,10 @@ class FitConfig:
     # without them it is a third of the size (290 MB instead of 860 for a 4M-voxel real capture)
     # and is written and read in a third of the time (checkpoints of interrupted runs keep them)
     final_optimizer: bool = True
+    # refine each held-out camera's pose against the model before scoring it (metrics.json's
+    # psnr_refined): for cameras from structure-from-motion, whose small errors would otherwise
+    # count against the model; `video` turns it on for the photos it prepares
+    refine_held_out: bool = False
 
 
 @dataclass(frozen=True)

@@ -24,24 +24,6 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if error == 0 else float(-10.0 * np.log10(error))
 
 
-def aligned_psnr(render: np.ndarray, truth: np.ndarray, max_shift: float = 0.03) -> float:
-    """PSNR of `render` against `truth` (H, W, 3) after the whole-pixel shift that best aligns
-    them (phase correlation), at most `max_shift` of the image's longer side, over the part the
-    two share: a small error in a held-out photo's camera moves its picture almost rigidly, and
-    this measures the model rather than that error."""
-    import cv2  # only this check needs OpenCV here
-
-    render, truth = _pair(render, truth)
-    grey = [np.ascontiguousarray(x.mean(axis=-1), dtype=np.float64) for x in (render, truth)]
-    (dx, dy), _ = cv2.phaseCorrelate(grey[0], grey[1])
-    limit = max_shift * max(truth.shape[:2])
-    dx, dy = (int(round(float(np.clip(d, -limit, limit)))) for d in (dx, dy))
-    h, w = truth.shape[:2]
-    moved = render[max(0, -dy):h - max(0, dy), max(0, -dx):w - max(0, dx)]
-    seen = truth[max(0, dy):h - max(0, -dy), max(0, dx):w - max(0, -dx)]
-    return psnr_of_mse(float(np.mean((moved - seen) ** 2)))
-
-
 def psnr_of_mse(error: float) -> float:
     """PSNR in dB of a mean squared error (of [0, 1] values)."""
     return float("inf") if error <= 0 else float(-10.0 * np.log10(error))

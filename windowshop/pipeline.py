@@ -125,16 +125,18 @@ def make_video(source: str | Path, out_mp4: str | Path, config: PipelineConfig =
     start = time.perf_counter()
     report("fit", 0.0)
     fit_config = fit_within_deadline(config, sum(seconds.values()))
+    prepared = scene_dir != source
     if show and fit_config.seconds != config.fit.seconds:
         print(f"fit: training for {fit_config.seconds:.0f} s instead of {config.fit.seconds:.0f} s to "
               f"be done in about {config.deadline:.0f} s (prepare took {seconds['prepare']:.0f} s; "
               "--deadline none trains for the whole budget)", file=sys.stderr)
     scene = load_scene(scene_dir, config.scene)
     model = model_config(config.model, config.preset, **config.model_settings)
-    metrics = fit(scene, config.model, model, fit_config, work / "run", device, show_progress=show,
+    metrics = fit(scene, config.model, model, replace(fit_config, refine_held_out=prepared), work / "run",
+                  device, show_progress=show,
                   callbacks=FitCallbacks(on_step=lambda fraction, stats: report("fit", fraction)))
     done("fit", start)
-    held_out = _held_out(metrics, config.prepare.force) if scene_dir != source else None
+    held_out = _held_out(metrics, config.prepare.force) if prepared else None
 
     start = time.perf_counter()
     report("render", 0.0)

@@ -98,7 +98,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "train_photos": len(train),
         "held_out_photos": metrics.get("test_views", 0),
         "held_out_psnr": metrics.get("psnr"), "held_out_ssim": metrics.get("ssim"),
-        "held_out_psnr_aligned": metrics.get("psnr_aligned"),
+        "held_out_psnr_refined": metrics.get("psnr_refined"),
         "verified": _verified(prepared, held_out), "held_out_check": held_out,
         "azimuths": [round(float(a), 1) for a in azimuths],
         "elevations": [round(float(e), 1) for e in elevations],

@@ -141,3 +141,13 @@ def test_photos_stacked_on_one_viewpoint_fold_but_a_second_turn_does_not():
     assert sorted((a, b) for a, b, _ in pairs) == [
         ("p00.jpg", "p04.jpg"), ("p01.jpg", "p05.jpg"), ("p02.jpg", "p06.jpg"),
         ("p03.jpg", "p07.jpg")]
+
+
+def test_held_out_check_reads_the_refined_psnr_against_its_threshold():
+    from windowshop.photos.verify import heldout
+
+    assert heldout.check({"psnr": 20.0}) is None  # a fit whose cameras were not refined
+    low = heldout.check({"psnr": 12.0, "psnr_refined": heldout.MIN_PSNR - 0.5, "test_views": 2})
+    high = heldout.check({"psnr": 12.0, "psnr_refined": heldout.MIN_PSNR + 0.5, "test_views": 2})
+    assert not low.passed and high.passed
+    assert "2 held-out photos" in low.detail and "12.0 dB before refining" in low.detail

@@ -142,7 +142,7 @@ def fit(scene: Scene, model_name: str, model_config: Any, fit_config: FitConfig,
         raise UserError(f"interrupted at step {progress.step}; carry on with --resume {out_dir}")
     run.checkpoint(final=True)
     results = evaluate_views(model, held_out_views(scene), scene.background,
-                             fit_config.memory_budget, out_dir / EVAL_DIR)
+                             fit_config.memory_budget, out_dir / EVAL_DIR, fit_config.refine_held_out)
     metrics = {**results, "model": model_name, "train_seconds": progress.elapsed,
                "iterations": progress.step,
                "stopped_by_passes": budget.iters != fit_config.iters and progress.step >= budget.iters}

@@ -57,3 +57,42 @@ def test_report_of_a_one_sided_capture(tmp_path):
     assert any("18.5 dB" in t for t in report["advice"])
     plot = coverage_plot(tmp_path / "coverage.png", report)
     assert Image.open(plot).size[0] > 100
+
+
+def test_trust_names_the_arc_and_heights_the_photos_cover_without_the_doubted_ones():
+    from windowshop.quality import trust
+
+    names = [f"p{i}.jpg" for i in range(8)]
+    azimuths = np.array([0, 20, 40, 60, 80, 100, 120, 250.0])
+    elevations = np.array([10, 12, 14, 16, 18, 20, 22, 60.0])
+    part = trust(names, azimuths, elevations, {"p7.jpg": "pairs"}, True)
+    assert part["level"] == "part" and part["arc"] == [0.0, 120.0] and part["arc_degrees"] == 120.0
+    assert part["elevations"] == [10.0, 22.0]  # p7, high up and doubted, does not widen them
+    assert "trust the side the photos show, 0° to 120°" in part["summary"]
+    assert "p7.jpg (pairs)" in part["summary"]
+    round_ = trust(names, np.arange(0, 360, 45.0), elevations, {}, True)
+    assert round_["level"] == "whole" and round_["summary"].startswith("checked: trust it all round")
+    forced = trust(names, np.arange(0, 360, 45.0), elevations, {}, False)
+    assert forced["level"] == "none" and forced["summary"].startswith("UNVERIFIED")
+    given = trust(names, azimuths, elevations, {}, None)
+    assert not given["checked"] and given["summary"].startswith("not checked")
+
+
+def test_report_doubts_the_photos_the_chosen_hypothesis_and_the_held_out_check_blamed(tmp_path):
+    from windowshop.photos.verify.heldout import MIN_PSNR
+
+    cams = ring(np.arange(0, 360, 36.0))
+    views = [View(c, np.zeros((64, 64, 3), np.float32), "test" if i == 9 else "train", f"dir/v{i}.jpg")
+             for i, c in enumerate(cams)]
+    scene = Scene(views=views, format="hand", source=tmp_path, aabb=np.array([[-1.0] * 3, [1.0] * 3]),
+                  near=1, far=5)
+    blame = {"name": "silhouettes", "passed": True, "suspects": ["v3.jpg"]}
+    prepared = {"used": 10, "placed": 10, "verification": {
+        "verified": True, "chosen": "as mapped",
+        "tried": [{"label": "pruned", "checks": [{**blame, "suspects": ["v5.jpg"]}]},
+                  {"label": "as mapped", "checks": [blame]}]}}
+    metrics = {"psnr": 20.0, "test_views": 1,
+               "per_view": [{"name": "dir/v9.jpg", "psnr": 12.0, "psnr_refined": MIN_PSNR - 1}]}
+    report = quality_report(scene, metrics, {"covered_span_degrees": 324.0}, prepared)
+    assert report["trust"]["doubtful"] == {"v3.jpg": "silhouettes", "v9.jpg": "held-out"}
+    assert report["trust"]["level"] == "part" and report["trust"]["checked"]

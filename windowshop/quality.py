@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from windowshop.scene.types import Camera, Scene
-from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, gaps_between
+from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, covered_arc, gaps_between
 
 GAP_DEGREES = 60.0  # an empty arc of azimuth at least this wide is worth walking again
 FEW_PHOTOS = 12  # placed photos under this: advise more
@@ -106,12 +106,63 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "covered_degrees": render.get("covered_span_degrees"),
         "turntable": render,
     }
+    names = [Path(v.name).name for v in scene.views]
+    report["trust"] = trust(names, azimuths, elevations, _doubtful(prepared, metrics), report["verified"])
     if render.get("swing"):
         report["note"] = (f"the photos cover {render['covered_span_degrees']:.0f}° of the circle "
                           f"(under {FULL_TURN_SPAN:.0f}°): the turntable swings across that arc and "
                           "back instead of showing a side nobody photographed")
     report["advice"] = advice(report)
     return report
+
+
+def trust(names: list[str], azimuths: np.ndarray, elevations: np.ndarray, doubtful: dict[str, str],
+          verified: bool | None) -> dict:
+    """Which part of the result to trust: the arc of azimuth and the band of elevation its
+    photos cover, the photos a check doubted (name -> check) left out of both. "level" is
+    "none" when a check failed and it was delivered by --force, "part" when the trusted photos
+    cover under FULL_TURN_SPAN degrees or some were doubted, else "whole"."""
+    kept = [i for i, name in enumerate(names) if name not in doubtful] or list(range(len(names)))
+    start, span = covered_arc(azimuths[kept])
+    level = "none" if verified is False else (
+        "part" if span < FULL_TURN_SPAN or doubtful else "whole")
+    found = {"level": level, "checked": verified is not None,
+             "arc": [round(start, 1), round((start + span) % 360.0, 1)], "arc_degrees": round(span, 1),
+             "elevations": [round(float(elevations[kept].min()), 1),
+                            round(float(elevations[kept].max()), 1)],
+             "doubtful": dict(sorted(doubtful.items()))}
+    return found | {"summary": trust_line(found)}
+
+
+def _doubtful(prepared: dict | None, metrics: dict) -> dict[str, str]:
+    """Photos a check of the delivered scene blamed (prepare's chosen hypothesis, the held-out
+    check's views under its threshold), name -> the check."""
+    from windowshop.photos.verify.heldout import MIN_PSNR
+
+    checks = (prepared or {}).get("verification") or {}
+    chosen = [t for t in checks.get("tried", []) if t["label"] == checks.get("chosen")]
+    doubtful = {Path(name).name: check["name"] for t in chosen[:1] for check in t["checks"]
+                for name in check["suspects"]}
+    for view in metrics.get("per_view", []):
+        if view.get("psnr_refined", MIN_PSNR) < MIN_PSNR:
+            doubtful.setdefault(Path(view["name"]).name, "held-out")
+    return doubtful
+
+
+def trust_line(trust: dict) -> str:
+    """The trust of a report in words, for a terminal and the page."""
+    where = (f"{trust['arc'][0]:.0f}° to {trust['arc'][1]:.0f}° around the object "
+             f"({trust['arc_degrees']:.0f}°), from {trust['elevations'][0]:.0f}° to "
+             f"{trust['elevations'][1]:.0f}° of elevation")
+    doubted = (f"; doubted: {', '.join(f'{n} ({c})' for n, c in trust['doubtful'].items())}"
+               if trust["doubtful"] else "")
+    if trust["level"] == "none":
+        return f"UNVERIFIED: delivered by --force although its checks failed{doubted}"
+    if not trust["checked"]:
+        return f"not checked (the poses were given): the photos cover {where}"
+    if trust["level"] == "part":
+        return f"checked in part: trust the side the photos show, {where}{doubted}"
+    return f"checked: trust it all round, {where}"
 
 
 def _verified(prepared: dict | None, held_out: dict | None) -> bool | None:
@@ -128,9 +179,7 @@ def summary_lines(report: dict) -> list[str]:
              f"{report['covered_degrees'] or 0:.0f}° of the circle covered, held-out PSNR "
              + (f"{psnr:.1f} dB on {report['held_out_photos']} photos" if psnr is not None
                 else "n/a (no photo held out)")]
-    if report.get("verified") is False:
-        lines.append("  UNVERIFIED: delivered by --force although its checks failed "
-                     "(see the report's verification)")
+    lines.append(f"  {report['trust']['summary']}")
     if "note" in report:
         lines.append(f"  note: {report['note']}")
     lines += [f"  advice: {tip}" for tip in report["advice"]]

@@ -120,6 +120,11 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     # the capture's quality report: what was placed and covered, the coverage plot
     wait_js(page, "document.getElementById('quality-summary').textContent.includes('photos placed')")
     assert "of the circle covered" in page.inner_text("#quality-summary")
+    # which part to trust, as the report says it (a posed upload: nothing checked its poses)
+    report = page.evaluate("fetch(document.querySelector('#video').src.replace('video.mp4', "
+                           "'report.json')).then((r) => r.json())")
+    assert page.inner_text("#quality-trust") == report["trust"]["summary"]
+    assert page.get_attribute("#quality-trust", "data-level") == report["trust"]["level"]
     wait_js(page, "document.getElementById('coverage').complete"
                   " && document.getElementById('coverage').naturalWidth > 100")
     assert job_id in page.get_attribute(f"#my-jobs a[href='/jobs/{job_id}']", "href")

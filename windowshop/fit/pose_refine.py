@@ -123,11 +123,13 @@ def _fit_level(model: RadianceModel, camera: Camera, image: np.ndarray,
         image = (blurred(frame.rgb, blur) - target).reshape(-1).astype(np.float64)
         return np.concatenate([image / math.sqrt(image.size), math.sqrt(PRIOR) * at / math.radians(1.0)])
 
-    damping = 1e-3
-    r = residual(delta)
+    damping, r = 1e-3, residual(delta)
+    # the Jacobian of the level's start serves all its steps (6 renders, not 6 per step): the
+    # corrections are small against the blur, so it hardly changes
+    jacobian = np.stack([(residual(delta + STEP * e) - r) / STEP for e in np.eye(6)], axis=1)
+    normal = jacobian.T @ jacobian
     for _ in range(ITERATIONS):
-        jacobian = np.stack([(residual(delta + STEP * e) - r) / STEP for e in np.eye(6)], axis=1)
-        normal, gradient = jacobian.T @ jacobian, jacobian.T @ r
+        gradient = jacobian.T @ r
         for _ in range(3):  # damping raised until a step lowers the error
             step = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9), -gradient)
             candidate = limited(delta + step)

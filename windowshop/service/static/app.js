@@ -243,6 +243,11 @@ async function showReport(links) {
     `, held-out photos reproduced at ${report.held_out_psnr.toFixed(1)} dB`;
   $("quality-summary").textContent = `${report.placed} of ${report.photos} photos placed, ` +
     `${Math.round(report.covered_degrees || 0)}° of the circle covered${psnr}.`;
+  // which part of the result the checks stand behind (windowshop.quality.trust)
+  const trust = $("quality-trust");
+  trust.hidden = !report.trust;
+  trust.textContent = report.trust ? report.trust.summary : "";
+  trust.dataset.level = report.trust ? report.trust.level : "";
   $("quality-note").hidden = !report.note;
   $("quality-note").textContent = report.note || "";
   const list = $("advice");

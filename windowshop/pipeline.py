@@ -26,8 +26,9 @@ from windowshop.photos.progress import StageCallback
 
 MARKER = "video.json"  # the summary a work folder of make_video holds (and may be replaced by)
 # What the deadline sets aside after training, measured on a 2-core CPU (bench/bench_real.py):
-# the fit's own work around its steps (carving, the held-out photos, the checkpoint) ...
-FIT_OVERHEAD_SECONDS = 4.0
+# the fit's own work around its steps (carving, the held-out photos with 3 cameras refined,
+# the checkpoint) ...
+FIT_OVERHEAD_SECONDS = 6.0
 RENDER_RAYS_PER_SECOND = 5e5  # ... and the turntable, rendered and encoded at this many pixels/s
 
 

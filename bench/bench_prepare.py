@@ -13,13 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from provenance import emit
+from provenance import emit, machine
 
 from windowshop.config import PrepareOptions
 from windowshop.photos.align import pose_errors
@@ -58,8 +57,7 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="also write the JSON here")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
-    results = {"machine": platform.platform(), "cpus": os.cpu_count(), "max_side": args.max_side,
-               "load_before": round(os.getloadavg()[0], 2)}
+    results = {**machine(), "max_side": args.max_side}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.frames:

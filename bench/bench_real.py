@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -24,7 +22,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from provenance import commit, emit
+from provenance import emit, machine
 from windowshop.config import PipelineConfig, VideoOptions
 from windowshop.device import pick_device
 from windowshop.fit.checkpoint import load_run
@@ -137,8 +135,7 @@ def main() -> None:
     args = parser.parse_args()
     device = pick_device(None)
     config = apply_run_overrides(PipelineConfig(), parse_assignments(args.set), "--set")
-    results = {"commit": commit(), "settings": args.set, "machine": f"{platform.processor() or platform.machine()}, "
-               f"{os.cpu_count()} cores", "device": str(device), "rows": {}}
+    results = {**machine(), "settings": args.set, "device": str(device), "rows": {}}
     photos = captures(args.photos)
     with tempfile.TemporaryDirectory(prefix="windowshop-bench-real-") as tmp:
         for name in args.rows:

@@ -306,7 +306,8 @@ def run_case(case: Case, options: PrepareOptions) -> dict:
     row.update(used=report.get("used"), placed=report.get("placed"), delivered=len(delivered),
                not_delivered=sorted(given - set(delivered)),
                ring=sorted(report.get("estimated_from_ring", {})),
-               dropped=report.get("dropped", {}), attempts=report.get("attempts"))
+               dropped=report.get("dropped", {}), attempts=report.get("attempts"),
+               stage_seconds=report.get("seconds"))
     if len(set(delivered) & set(case.truth)) >= 3:
         score(row, delivered, case.truth, case.up)
     else:  # no published poses, or too few of the delivered photos have trustworthy ones

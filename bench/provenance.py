@@ -26,8 +26,10 @@ def commit() -> str:
 
 def machine() -> dict:
     """Where and when the row ran: commit, CPU, threads and the load at the start."""
-    return {"commit": commit(), "platform": platform.platform(),
-            "cpu": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+    from windowshop.device import cpu_profile
+
+    return {"commit": commit(), "platform": platform.platform(), "cpu": cpu_profile(),
+            "cpus": os.cpu_count(),
             "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
             "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
 

@@ -223,7 +223,9 @@ class ExportOptions:
     """A run's object as a model file shops accept (`windowshop export`; `video` writes GLB and USDZ)."""
 
     triangles: int = 100_000  # at most this many triangles (Amazon takes up to 150k)
-    texture: int = 2048  # pixels a side of the baked base-colour texture (0: vertex colours only)
+    # pixels a side of the baked base-colour texture at most: fewer (halved, to 256) where the
+    # photos' pixels on the object are coarser (export.texture.bake_size); 0: vertex colours only
+    texture: int = 2048
     size_cm: float | None = None  # scale the object to this real height (None: the scene's own units)
     resolution: int = 256  # marching-cubes cells along the longest side of the object's box
     level_views: int = 8  # training views whose silhouettes choose the surface's density level

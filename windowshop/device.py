@@ -1,5 +1,6 @@
-"""Pick the torch device once (only the CLI and the service call pick_device), and the CPU
-thread count that runs fastest as training or rendering goes (ThreadTuner)."""
+"""Pick the torch device once (only the CLI and the service call pick_device), what the CPU
+offers the code (cpu_profile), and the CPU thread count that runs fastest as training or
+rendering goes (ThreadTuner)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,35 @@ def pick_device(name: str | None = None) -> torch.device:
     if name:
         return torch.device(name)
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+VECTOR_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "amx_bf16", "avx512_vnni")
+
+
+def cpu_profile() -> dict:
+    """What the CPU is and what of it the code uses: its model and vector flags (Linux's
+    /proc/cpuinfo), PyTorch's kernels' instruction set (ATEN_CPU_CAPABILITY lowers it), whether
+    oneDNN runs bfloat16 (ONEDNN_MAX_CPU_ISA=AVX2 turns it off, and with it the fast model's
+    bf16 MLP) and the target the fused kernels are built for."""
+    import os
+    import platform
+    from pathlib import Path
+
+    from windowshop.field.kernels import MARCH
+
+    info = {}
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            info.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    flags = set(info.get("flags", "").split())
+    return {"model": info.get("model name") or platform.processor() or platform.machine(),
+            "cores": os.cpu_count(), "flags": [f for f in VECTOR_FLAGS if f in flags],
+            "torch_capability": torch.backends.cpu.get_cpu_capability(),
+            "bf16": bool(torch.ops.mkldnn._is_mkldnn_bf16_supported()), "kernels_march": MARCH,
+            "profile": os.environ.get("WINDOWSHOP_CPU_PROFILE", "host")}
 
 
 class ThreadTuner:

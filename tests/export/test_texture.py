@@ -22,3 +22,12 @@ def test_photos_coarser_than_the_texels_bake_a_coarser_texture():
     # 1.5 texels a pixel at 512, 0.75 at 256
     assert bake_size(unwrapped, 2048, photo_with(texels / 6)) == 512
     assert bake_size(unwrapped, 2048, photo_with(2 * texels)) == 2048  # finer photos: full size
+
+
+def test_the_typical_photo_sets_the_bake_size_not_one_close_up():
+    vertices, faces = square(0.0, 0.5)
+    uv = np.array([[0.0, 0.5], [0.5, 0.5], [0.5, 0.0], [0.0, 0.0]])
+    unwrapped = Unwrapped(vertices, faces, np.tile([0.0, 0.0, 1.0], (4, 1)), uv, np.arange(4))
+    cameras = [dataclasses.replace(top_camera(40), fx=4 * p, fy=4 * p) for p in (170, 170, 2048)]
+    photos = Photos(cameras, [np.zeros((40, 40, 3), np.float32)] * 3, [None] * 3)
+    assert bake_size(unwrapped, 2048, photos) == 512  # two photos at 170 pixels a unit, one close-up

@@ -114,7 +114,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
                                    every_photo)
             lap("refine")
-        texture = tex.finish_texture(image, options.texture)
+        texture = tex.finish_texture(image)
         surface = unwrapped
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)
@@ -129,7 +129,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
                                                     cell, occluders))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
-            "triangles": int(len(faces)), "texture": options.texture,
+            "triangles": int(len(faces)), "texture": 0 if texture is None else texture.shape[0],
             "photos": 0 if photos is None else len(photos.cameras), "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
                  normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),

@@ -2,7 +2,9 @@
 through ctypes.
 
 The library has no torch headers, so building it takes well under a second and needs only `cc`;
-it is cached per source, flags and CPU under `~/.cache/windowshop` (or `$XDG_CACHE_HOME`). Without
+it is cached per source, flags and CPU under `~/.cache/windowshop` (or `$XDG_CACHE_HOME`). It is
+built for the host's vector units unless `WINDOWSHOP_KERNELS_MARCH` names another target (e.g.
+`x86-64-v3`, AVX2 as most laptops have: the ordinary-CPU profile of bench/cpu_profile.py). Without
 a compiler, on another device than the CPU, or with `WINDOWSHOP_KERNELS=0`, callers use their
 pure-PyTorch twins instead (`available()` says which). Every wrapper takes contiguous CPU tensors of
 the documented dtypes and writes into the given outputs.
@@ -27,7 +29,8 @@ import torch
 log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("kernels.c")
-FLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno", "-shared", "-fPIC"]
+MARCH = os.environ.get("WINDOWSHOP_KERNELS_MARCH", "native")
+FLAGS = ["-O3", f"-march={MARCH}", "-ffp-contract=off", "-fno-math-errno", "-shared", "-fPIC"]
 
 _P, _I, _F = ctypes.c_void_p, ctypes.c_int64, ctypes.c_float
 _SIGNATURES = {

@@ -45,6 +45,12 @@ LOWEST_POSE_INLIERS = 8
 # dtu_skull 7 -> 8)
 WIDE_MAX_PHOTOS = 12
 CHUNK = 4  # photos per feature-extraction call (a progress step)
+FIRST_OCTAVE = -1
+MAX_FEATURES = 8192
+IGNORE_REDUNDANT = False
+GLOBAL_BA_RATIO = 1.1
+BA_THREADS_FROM = 50000
+RESUME = False
 # Matching is done in about MATCH_STEPS calls (progress steps) of at least MATCH_CHUNK pairs:
 # each call reads its photos' features again (kermit's 55 pairs: 3.6 s in one call, 7.0 in 20;
 # fruit's 190 dense pairs: 14.2 s in one, 18.6 in five)
@@ -112,6 +118,8 @@ def _reader_options(settings: SfmSettings) -> pycolmap.ImageReaderOptions:
 
 def _extraction(wide: bool, affine: bool) -> pycolmap.FeatureExtractionOptions:
     options = pycolmap.FeatureExtractionOptions()
+    options.sift.first_octave = FIRST_OCTAVE
+    options.sift.max_num_features = MAX_FEATURES
     if wide:
         options.sift.peak_threshold = DENSE_PEAK
         options.sift.estimate_affine_shape = affine
@@ -188,6 +196,9 @@ def mapping_options(settings: SfmSettings, relaxed: bool, lowest: bool = False
         options.ba_refine_extra_params = False
         options.mapper.abs_pose_refine_focal_length = False
         options.mapper.abs_pose_refine_extra_params = False
+    options.mapper.ba_global_ignore_redundant_points3D = IGNORE_REDUNDANT
+    options.ba_global_frames_ratio = options.ba_global_points_ratio = GLOBAL_BA_RATIO
+    options.ba_min_num_residuals_for_cpu_multi_threading = BA_THREADS_FROM
     if relaxed:
         options.min_num_matches = 8
         options.mapper.init_min_num_inliers = 30
@@ -201,11 +212,18 @@ def mapping_options(settings: SfmSettings, relaxed: bool, lowest: bool = False
 
 
 def map_once(database: Path, image_dir: Path, out: Path, settings: SfmSettings, relaxed: bool,
-             advance, lowest: bool = False) -> pycolmap.Reconstruction | None:
-    """The largest model incremental mapping builds (None if it builds none)."""
+             advance, lowest: bool = False, start: pycolmap.Reconstruction | None = None
+             ) -> pycolmap.Reconstruction | None:
+    """The largest model incremental mapping builds (None if it builds none), growing `start`
+    when given."""
     out.mkdir(parents=True, exist_ok=True)
+    given = ""
+    if start is not None:
+        given = out / "start"
+        given.mkdir(exist_ok=True)
+        start.write(given)
     models = pycolmap.incremental_mapping(
-        database, image_dir, out, options=mapping_options(settings, relaxed, lowest),
+        database, image_dir, out, input_path=given, options=mapping_options(settings, relaxed, lowest),
         initial_image_pair_callback=lambda: advance(2), next_image_callback=lambda: advance(1))
     if not models:
         return None
@@ -248,8 +266,9 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
             with stages.stage("matching" + suffix, len(name_pairs)) as advance:
                 match(database, work, name_pairs, settings, wide, advance)
         with stages.stage("placing cameras" + suffix, len(names)) as advance:
+            grow = best if RESUME and label == "relaxed" else None
             model = map_once(database, image_dir, work / f"sparse_{label}", settings, relaxed,
-                             advance, lowest)
+                             advance, lowest, grow)
         attempts.append(Attempt(label, _placed(model), time.perf_counter() - start))
         if _placed(model) > _placed(best):
             best, best_database = model, database

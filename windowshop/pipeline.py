@@ -29,7 +29,10 @@ MARKER = "video.json"  # the summary a work folder of make_video holds (and may 
 # the fit's own work around its steps (carving, the held-out photos with 3 cameras refined,
 # the checkpoint) ...
 FIT_OVERHEAD_SECONDS = 6.0
-RENDER_RAYS_PER_SECOND = 5e5  # ... and the turntable, rendered and encoded at this many pixels/s
+RENDER_RAYS_PER_SECOND = 5e5  # ... the turntable, rendered and encoded at this many pixels/s ...
+# ... and the GLB and USDZ when asked for: 5-14 s for 11-20 photos on the ordinary-CPU profile
+# (bench/bench_real.py under bench/cpu_profile.py ordinary; bench/RESULTS.md, issue 35)
+EXPORT_SECONDS = 12.0
 
 
 @dataclass
@@ -70,12 +73,14 @@ def _work_dir(work: Path) -> Path:
 
 def fit_within_deadline(config: PipelineConfig, spent: float) -> FitConfig:
     """The fit's settings with its time budget cut so that a job which has `spent` seconds
-    before training still ends by `config.deadline` (estimating the rest), to no less than
+    before training still ends by `config.deadline` (estimating the rest: the fit's overhead,
+    the turntable and, when asked for, the 3D models), to no less than
     `config.min_fit_seconds`; unchanged without a deadline or for a budget in steps."""
     fit, render = config.fit, config.render
     if config.deadline is None or fit.seconds is None:
         return fit
-    after = FIT_OVERHEAD_SECONDS + render.frames * render.width * render.height / RENDER_RAYS_PER_SECOND
+    after = (FIT_OVERHEAD_SECONDS + render.frames * render.width * render.height / RENDER_RAYS_PER_SECOND
+             + (EXPORT_SECONDS if config.models else 0.0))
     left = config.deadline - spent - after
     return replace(fit, seconds=max(config.min_fit_seconds, min(fit.seconds, left)))
 

@@ -12,7 +12,8 @@ from windowshop.errors import UserError
 from windowshop.config import PipelineConfig
 from windowshop.fit.checkpoint import load_run
 from windowshop.overrides import apply_overrides
-from windowshop.pipeline import (FIT_OVERHEAD_SECONDS, RENDER_RAYS_PER_SECOND, fit_within_deadline,
+from windowshop.pipeline import (EXPORT_SECONDS, FIT_OVERHEAD_SECONDS, RENDER_RAYS_PER_SECOND,
+                                 fit_within_deadline,
                                  is_posed_scene, make_video)
 from windowshop.scene.synthetic import synthetic_scene
 from windowshop.scene.writer import write_transforms
@@ -32,10 +33,13 @@ def posed(tmp_path_factory):
 
 
 def test_a_long_prepare_shortens_training_to_meet_the_deadline():
-    config = PipelineConfig()  # 30 s of training, a 60 s deadline, 60 frames of 256x256
-    after = FIT_OVERHEAD_SECONDS + 60 * 256 * 256 / RENDER_RAYS_PER_SECOND
-    assert fit_within_deadline(config, 10.0).seconds == 30.0  # time enough: the whole budget
-    assert fit_within_deadline(config, 30.0).seconds == pytest.approx(60.0 - 30.0 - after)
+    config = PipelineConfig()  # 30 s of training, a 60 s deadline, 60 frames of 256x256, models
+    after = FIT_OVERHEAD_SECONDS + 60 * 256 * 256 / RENDER_RAYS_PER_SECOND + EXPORT_SECONDS
+    assert fit_within_deadline(config, 2.0).seconds == 30.0  # time enough: the whole budget
+    assert fit_within_deadline(config, 15.0).seconds == pytest.approx(60.0 - 15.0 - after)
+    # without the models, their time is training's
+    video_only = apply_overrides(config, {"models": False})
+    assert fit_within_deadline(video_only, 20.0).seconds == pytest.approx(60.0 - 20.0 - after + EXPORT_SECONDS)
     assert fit_within_deadline(config, 55.0).seconds == config.min_fit_seconds
     assert fit_within_deadline(apply_overrides(config, {"deadline": None}), 55.0).seconds == 30.0
     steps = apply_overrides(config, {"fit.iters": 100})  # a budget in steps is the user's call

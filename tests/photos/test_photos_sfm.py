@@ -69,3 +69,11 @@ def test_eight_wide_baseline_skull_photos_are_placed_right(tmp_path):
     errors = {(a, b): rotation_angle((got[a] @ got[b].T).T @ (truth[a] @ truth[b].T))
               for a, b in combinations(sorted(got), 2)}
     assert max(errors.values()) < MAX_ROTATION_DEG, errors
+
+
+def test_large_sets_keep_fewer_features_a_photo():
+    from windowshop.photos.sfm import FEATURE_BUDGET, MIN_FEATURES, features_per_photo
+
+    assert features_per_photo(8) == 8192 and features_per_photo(20) == 8192  # COLMAP's own cap
+    assert features_per_photo(88) == FEATURE_BUDGET // 88 < 8192
+    assert features_per_photo(1000) == MIN_FEATURES

@@ -149,3 +149,16 @@ def test_holes_stay_the_objects_unless_the_views_see_through(thing):
     assert silhouettes[0][v, u] and not raws[0][v, u]  # a hole in the front view either way
     assert final[0][v, u] == (thing != "frame")
     assert all(f.sum() >= 0.9 * r.sum() for f, r in zip(final, raws))  # the rest is kept
+
+
+def test_photos_beyond_the_hulls_subset_are_cut_within_it(monkeypatch):
+    # the first round cuts 4 of the 10 photos; the other 6 start from the hull's outline alone
+    monkeypatch.setattr(segment, "HULL_VIEWS", 4)
+    views, truths = _views(np.random.default_rng(0))
+    cut = []
+    monkeypatch.setattr(segment, "grabcut_mask",
+                        lambda v, aabb, real=segment.grabcut_mask: cut.append(v.name) or real(v, aabb))
+    masks = segment.segment(views, np.array([[-0.8, -0.8, 0.01], [0.8, 0.8, 1.3]]))
+    ious = [(m & t).sum() / (m | t).sum() for m, t in zip(masks, truths)]
+    assert len(cut) == 4 and len(masks) == len(views)
+    assert np.mean(ious) > 0.9 and min(ious) > 0.8, ious

@@ -34,6 +34,10 @@ CONTEXT = 0.1  # GrabCut sees this share of the image diagonal around the box (b
 SEED_RADIUS = 0.006  # keypoint seeds are disks of this share of the image diagonal
 HULL_TOLERANCE = 0.15  # a hull voxel survives this share of views missing it (imperfect masks)
 SEE_THROUGH = 0.8  # a hole is the object's where its ray meets a voxel this share of views see
+# The first round, which only feeds the hull, cuts at most this many photos spread over the set;
+# the second cuts every photo within the hull they carve (the first round's own cut, else the
+# hull's outline, as its guess of the object)
+HULL_VIEWS = 24
 
 
 @dataclass(frozen=True)
@@ -248,8 +252,11 @@ def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:
     """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3): GrabCut in
     each photo, then again within the visual hull of the first round's masks."""
     # OpenCV lets go of the GIL inside grabCut, so the photos are cut on every core at once
-    masks = parallel_map(lambda v: grabcut_mask(v, aabb), views)
-    carved = carve(masks, [v.camera for v in views], aabb)
-    if carved is None:
-        return masks
-    return parallel_map(lambda vms: refined_mask(*vms), list(zip(views, masks, carved[0])))
+    first = np.unique(np.linspace(0, len(views) - 1, min(len(views), HULL_VIEWS)).round().astype(int))
+    masks = dict(zip(first.tolist(), parallel_map(lambda k: grabcut_mask(views[k], aabb), first)))
+    hull = _hull(list(masks.values()), [views[k].camera for k in masks], aabb)
+    if hull is None:  # no hull to cut within: each photo's own cut
+        return [masks[k] if k in masks else grabcut_mask(v, aabb) for k, v in enumerate(views)]
+    silhouettes = [hull_silhouette(*hull, v.camera) for v in views]
+    return parallel_map(lambda k: refined_mask(views[k], masks.get(k, silhouettes[k]), silhouettes[k]),
+                        range(len(views)))

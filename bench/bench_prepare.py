@@ -1,8 +1,13 @@
 """Seconds per `prepare` stage for kermit (11 photos), 20 beer_can photos and 80 frames of the
 beer_can video (given as the video, then as a folder of photos: the matcher is picked by count and
-order), as JSON.
+order), all 78 of fruit's photos, and with `--figure N` N rendered 800x800 photos of a plain
+figure on a granite table (windowshop.scene.products.figure_on_granite; every photo rich in the
+table's features, the issue 35 case; rendered once, about 4 minutes for 88, and kept under
+~/.cache/windowshop/bench), as JSON.
 
-    python bench/bench_prepare.py [--max-side 640] [--frames 80] [--video] [--out results.json]
+    python bench/bench_prepare.py [--max-side 640] [--frames 80] [--figure 88] [--video]
+                                  [--out results.json]
+    python bench/cpu_profile.py ordinary python bench/bench_prepare.py --figure 88
 
 `--video` also times `windowshop video` end to end (prepare, fit, render) on the 20 photos with
 its default settings. Pose errors against beer_can's COLMAP model are included for reference.
@@ -36,6 +41,17 @@ def beer_photos(count: int = 20) -> list[Path]:
     return [DATA / "beer_can" / "images" / f"{frames[i]:04d}.jpg" for i in picks]
 
 
+def figure_photos(count: int) -> Path:
+    """The folder of `count` 800x800 photos of the figure on granite, rendered on first use."""
+    from windowshop.scene.products import figure_on_granite
+
+    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "windowshop" / "bench"
+    folder = root / f"figure_on_granite_{count}"
+    if not (folder / "transforms.json").is_file():
+        figure_on_granite(folder, count=count, size=(800, 800))
+    return folder / "images"
+
+
 def timed_prepare(source: Path, out: Path, options: PrepareOptions) -> dict:
     start = time.perf_counter()
     result = prepare(source, out, options, show=False)
@@ -52,6 +68,8 @@ def main() -> None:
     parser.add_argument("--max-side", type=int, default=640)
     parser.add_argument("--frames", type=int, default=80,
                         help="frames sampled from beer_can's video (0: no video row)")
+    parser.add_argument("--figure", type=int, default=0,
+                        help="photos of the rendered figure on granite (0: no such row)")
     parser.add_argument("--video", action="store_true",
                         help="also time `windowshop video` on the 20 photos")
     parser.add_argument("--out", default=None, help="also write the JSON here")
@@ -67,6 +85,10 @@ def main() -> None:
             results[f"beer_can_photos_{args.frames}"] = timed_prepare(
                 tmp / "beer_video" / "images", tmp / "beer_photos", frames)
         results["kermit"] = timed_prepare(DATA / "kermit", tmp / "kermit", options)
+        results["fruit_78"] = timed_prepare(DATA / "fruit" / "newfruit_small", tmp / "fruit", options)
+        if args.figure:
+            results[f"figure_on_granite_{args.figure}"] = timed_prepare(
+                figure_photos(args.figure), tmp / "figure", options)
         photos = tmp / "beer20"
         photos.mkdir()
         for path in beer_photos():

@@ -77,3 +77,23 @@ def test_large_sets_keep_fewer_features_a_photo():
     assert features_per_photo(8) == 8192 and features_per_photo(20) == 8192  # COLMAP's own cap
     assert features_per_photo(88) == FEATURE_BUDGET // 88 < 8192
     assert features_per_photo(1000) == MIN_FEATURES
+
+
+def test_a_long_walk_is_mapped_from_every_other_photo_then_grown(tmp_path, monkeypatch):
+    # 16 consecutive dtu_skull views (steps of about 2 degrees) as a "long" walk of more than 8
+    monkeypatch.setattr(sfm, "LONG_WALK", 8)
+    mapped = []
+    real = sfm.map_once
+    monkeypatch.setattr(sfm, "map_once", lambda *a, **k: mapped.append(k.get("only")) or real(*a, **k))
+    paths = [DATA / "dtu_skull" / "images" / f"{i:03d}.jpg" for i in range(20, 36)]
+    image_dir, names = _images(tmp_path, paths, max_side=320)
+    result = sfm.reconstruct(image_dir, names, tmp_path, sfm.SfmSettings(), Stages(show=False))
+    assert mapped[0] == names[::2] and mapped[1] is None  # half first, then all of them
+    assert len(result.placed) == 16, result.attempts
+    truth = {f"{i:03d}": cv2.decomposeProjectionMatrix(np.load(
+        DATA / "dtu_skull" / "cameras_sphere.npz")[f"world_mat_{i}"][:3])[1] for i in range(20, 36)}
+    got = {im.name[:-4]: im.cam_from_world().rotation.matrix()
+           for im in result.reconstruction.images.values() if im.has_pose}
+    errors = [rotation_angle((got[a] @ got[b].T).T @ (truth[a] @ truth[b].T))
+              for a, b in combinations(sorted(got), 2)]
+    assert max(errors) < MAX_ROTATION_DEG

@@ -97,3 +97,19 @@ def test_a_long_walk_is_mapped_from_every_other_photo_then_grown(tmp_path, monke
     errors = [rotation_angle((got[a] @ got[b].T).T @ (truth[a] @ truth[b].T))
               for a, b in combinations(sorted(got), 2)]
     assert max(errors) < MAX_ROTATION_DEG
+
+
+def test_sift_starts_from_the_photos_own_size_only_where_they_are_rich_in_features(tmp_path):
+    from windowshop.scene.products import figure_on_granite
+
+    # a plain figure on a granite table, 13 photos of 640x480: the table gives ~1,400 features
+    # a photo at their own size; fruit's photos 300-650, so SIFT doubles them
+    granite = figure_on_granite(tmp_path / "granite", count=13, size=(640, 480)) / "images"
+    names = sorted(p.name for p in granite.glob("*.jpg"))
+    assert sfm.first_octave(tmp_path / "g.db", granite, names, sfm.SfmSettings()) == 0
+    fruit = sorted((DATA / "fruit" / "newfruit_small").glob("*.jpg"))[::6][:13]
+    (tmp_path / "fruit").mkdir()
+    image_dir, fruit_names = _images(tmp_path / "fruit", fruit)
+    assert sfm.first_octave(tmp_path / "f.db", image_dir, fruit_names, sfm.SfmSettings()) == -1
+    assert sfm.first_octave(tmp_path / "s.db", granite, names[:12], sfm.SfmSettings()) == -1  # a few photos
+    assert not list(tmp_path.glob("*_octave.db"))  # the scratch database is gone

@@ -5,6 +5,9 @@ rendering goes (ThreadTuner)."""
 from __future__ import annotations
 
 import collections
+import os
+import platform
+from pathlib import Path
 
 import torch
 
@@ -24,10 +27,6 @@ def cpu_profile() -> dict:
     /proc/cpuinfo), PyTorch's kernels' instruction set (ATEN_CPU_CAPABILITY lowers it), whether
     oneDNN runs bfloat16 (ONEDNN_MAX_CPU_ISA=AVX2 turns it off, and with it the fast model's
     bf16 MLP) and the target the fused kernels are built for."""
-    import os
-    import platform
-    from pathlib import Path
-
     from windowshop.field.kernels import MARCH
 
     info = {}

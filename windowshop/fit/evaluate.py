@@ -21,6 +21,7 @@ from windowshop.fit.pose_refine import refine_camera
 from windowshop.metrics import psnr, ssim
 from windowshop.model import RadianceModel
 from windowshop.render.frames import display_background, render_camera
+from windowshop.scene.selection import evenly_spaced
 from windowshop.scene.types import Scene, View
 
 EVAL_DIR = "eval"
@@ -70,8 +71,7 @@ def evaluate_views(model: RadianceModel, views: list[View], background: str,
         image_dir.mkdir(parents=True, exist_ok=True)
     start, per_view = time.perf_counter(), []
     colour = display_background(background)
-    spread = np.linspace(0, len(views) - 1, min(len(views), REFINED_VIEWS)).round().astype(int)
-    refined = set(spread.tolist()) if refine else set()
+    refined = set(evenly_spaced(len(views), min(len(views), REFINED_VIEWS)).tolist()) if refine else set()
     for index, view in enumerate(views):
         truth = target_image(view, background)
         frame = render_camera(model, view.camera, colour, memory_budget)

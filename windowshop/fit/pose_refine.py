@@ -14,9 +14,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
-import torch
-import torch.nn.functional as F
+from scipy.spatial.transform import Rotation
 
 from windowshop.model import RadianceModel
 from windowshop.render.frames import render_camera
@@ -44,7 +44,6 @@ class Refined:
     camera: Camera
     turn_deg: float  # rotation of the correction
     shift: float  # move of the camera's centre, as a share of its distance to the object
-    renders: int  # renders of the small copy it took
 
 
 def moved(camera: Camera, delta: np.ndarray) -> Camera:
@@ -57,13 +56,8 @@ def moved(camera: Camera, delta: np.ndarray) -> Camera:
 
 
 def rotation(vector: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation matrix of a rotation vector (Rodrigues' formula)."""
-    angle = float(np.linalg.norm(vector))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = vector / angle
-    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(angle) * cross + (1 - math.cos(angle)) * cross @ cross
+    """(3, 3) rotation matrix of a rotation vector."""
+    return Rotation.from_rotvec(vector).as_matrix()
 
 
 def small_copy(image: np.ndarray, camera: Camera, size: int, blur: float) -> tuple[np.ndarray, Camera]:
@@ -71,20 +65,14 @@ def small_copy(image: np.ndarray, camera: Camera, size: int, blur: float) -> tup
     blurred by `blur`, with its camera."""
     scale = min(1.0, size / max(camera.width, camera.height))
     width, height = max(8, round(camera.width * scale)), max(8, round(camera.height * scale))
-    pixels = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1)[None]
-    small = F.interpolate(pixels, size=(height, width), mode="area")
-    return blurred(small[0].permute(1, 2, 0).numpy(), blur), camera.resized(width, height)
+    small = cv2.resize(np.asarray(image, dtype=np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    return blurred(small, blur), camera.resized(width, height)
 
 
 def blurred(image: np.ndarray, sigma: float) -> np.ndarray:
-    """`image` (H, W, 3) under a separable Gaussian of `sigma` pixels (edges repeated)."""
-    radius = math.ceil(3 * sigma)
-    taps = torch.exp(-0.5 * (torch.arange(-radius, radius + 1, dtype=torch.float32) / sigma) ** 2)
-    taps = taps / taps.sum()
-    x = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[:, None]  # (3, 1, H, W)
-    x = F.conv2d(F.pad(x, (radius, radius, 0, 0), mode="replicate"), taps.view(1, 1, 1, -1))
-    x = F.conv2d(F.pad(x, (0, 0, radius, radius), mode="replicate"), taps.view(1, 1, -1, 1))
-    return x[:, 0].permute(1, 2, 0).numpy()
+    """`image` (H, W, 3) under a Gaussian of `sigma` pixels (edges repeated)."""
+    return cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), sigma,
+                            borderType=cv2.BORDER_REPLICATE)
 
 
 def limited(delta: np.ndarray) -> np.ndarray:
@@ -100,25 +88,20 @@ def limited(delta: np.ndarray) -> np.ndarray:
 def refine_camera(model: RadianceModel, camera: Camera, image: np.ndarray,
                   background: tuple[float, float, float], memory_budget: int) -> Refined:
     """`camera` moved (by at most MAX_TURN) so that the model's render best matches `image`."""
-    delta, renders = np.zeros(6), 0
+    delta = np.zeros(6)
     for size, blur in LEVELS:
-        delta, count = _fit_level(model, camera, image, background, memory_budget, size, blur, delta)
-        renders += count
+        delta = _fit_level(model, camera, image, background, memory_budget, size, blur, delta)
     return Refined(moved(camera, delta), math.degrees(float(np.linalg.norm(delta[:3]))),
-                   float(np.linalg.norm(delta[3:])), renders)
+                   float(np.linalg.norm(delta[3:])))
 
 
 def _fit_level(model: RadianceModel, camera: Camera, image: np.ndarray,
                background: tuple[float, float, float], memory_budget: int, size: int, blur: float,
-               delta: np.ndarray) -> tuple[np.ndarray, int]:
-    """Levenberg-Marquardt steps from `delta` on one level's copy; the correction and the
-    renders it took."""
+               delta: np.ndarray) -> np.ndarray:
+    """Levenberg-Marquardt steps from `delta` on one level's copy; the correction."""
     target, small = small_copy(image, camera, size, blur)
-    renders = 0
 
     def residual(at: np.ndarray) -> np.ndarray:
-        nonlocal renders
-        renders += 1
         frame = render_camera(model, moved(small, at), background, memory_budget)
         image = (blurred(frame.rgb, blur) - target).reshape(-1).astype(np.float64)
         return np.concatenate([image / math.sqrt(image.size), math.sqrt(PRIOR) * at / math.radians(1.0)])
@@ -140,4 +123,4 @@ def _fit_level(model: RadianceModel, camera: Camera, image: np.ndarray,
             damping *= 10
         else:
             break
-    return delta, renders
+    return delta

@@ -24,6 +24,7 @@ from windowshop.rays import project
 from windowshop.scene.cameras import box_corners
 from windowshop.scene.hull import GRID, hull_points
 from windowshop.scene.images import parallel_map
+from windowshop.scene.selection import evenly_spaced
 from windowshop.scene.types import Camera
 
 ITERATIONS = 5  # GrabCut rounds
@@ -252,8 +253,8 @@ def segment(views: list[View], aabb: np.ndarray) -> list[np.ndarray]:
     """(H, W) bool object masks of the `views` of an object in the box `aabb` (2, 3): GrabCut in
     each photo, then again within the visual hull of the first round's masks."""
     # OpenCV lets go of the GIL inside grabCut, so the photos are cut on every core at once
-    first = np.unique(np.linspace(0, len(views) - 1, min(len(views), HULL_VIEWS)).round().astype(int))
-    masks = dict(zip(first.tolist(), parallel_map(lambda k: grabcut_mask(views[k], aabb), first)))
+    first = evenly_spaced(len(views), min(len(views), HULL_VIEWS)).tolist()
+    masks = dict(zip(first, parallel_map(lambda k: grabcut_mask(views[k], aabb), first)))
     hull = _hull(list(masks.values()), [views[k].camera for k in masks], aabb)
     if hull is None:  # no hull to cut within: each photo's own cut
         return [masks[k] if k in masks else grabcut_mask(v, aabb) for k, v in enumerate(views)]

@@ -3,7 +3,7 @@ JSON, one line per case as it finishes and a table at the end.
 
     python bench/bench_verify.py [--sets dtu_skull,temple] [--no-full | --no-subsets]
         [--count 8] [--offsets 3] [--only SUBSTRING] [--extra NAME=PATH ...]
-        [--prepare KEY=VALUE ...] [--out results.json]
+        [--prepare KEY=VALUE ...] [--sensors] [--out results.json]
 
 Cases: each shared capture with all its photos ("<capture>/full"), and `--offsets` subsets of
 `--count` photos ("<capture>/8@k"): k = 0 is bench_fewphoto's own subset (farthest-point sampling
@@ -30,6 +30,14 @@ folder of links to its photos. Outcome:
   error            prepare raised anything else (a bug; type and message kept).
 The delivered poses are transforms.json's frames, each mapped to its photo by report.json's
 "views"; report.json's "attempts" and, when present, "verification" are kept verbatim.
+
+`--sensors` gives each case the capture.json the page's capture mode would write on a phone
+(windowshop.photos.sensors), made from the published poses of its scored photos and the true
+up: each photo's up in its camera frame turned by a random 1.5 deg (a steady phone's
+accelerometer), its heading (the azimuth of its view about the true up) with 5 deg of noise and
+a compass drift growing to 15 deg over the walk, and its order (file names). Photos without a
+trustworthy published pose get no entry, so prepare uses the priors only where they cover at
+least half the photos; report.json's "priors" is kept.
 
 up_error_deg (every delivered case with known poses and a known true up): degrees between the
 delivered scene's up and the true up. prepare's normalised frame has up = +z; the delivered
@@ -276,8 +284,49 @@ def score(row: dict, delivered: dict[str, np.ndarray], truth: dict[str, np.ndarr
     row["outcome"] = "right" if good else "wrong-delivered"
 
 
-def run_case(case: Case, options: PrepareOptions) -> dict:
-    """prepare on the case's photos (links in a folder of their own), classified and scored."""
+GRAVITY_NOISE_DEG = 1.5  # --sensors: a steady phone's accelerometer ...
+HEADING_NOISE_DEG = 5.0  # ... its heading's noise ...
+HEADING_DRIFT_DEG = 15.0  # ... and drift over the walk
+
+
+def _turned(vector: np.ndarray, degrees: float, rng: np.random.Generator) -> np.ndarray:
+    """`vector` (3,) unit, turned by `degrees` about a random axis perpendicular to it."""
+    axis = np.cross(vector, rng.normal(size=3))
+    axis /= np.linalg.norm(axis)
+    angle = np.radians(degrees)
+    return vector * np.cos(angle) + np.cross(axis, vector) * np.sin(angle)
+
+
+def sensor_capture(case: Case, folder: Path, seed: int = 0) -> int:
+    """capture.json in `folder` as a phone would have written it for the case (module
+    docstring); returns how many photos it covers."""
+    if case.up is None:
+        return 0
+    rng = np.random.default_rng(seed)
+    up = case.up / np.linalg.norm(case.up)
+    east = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    east /= np.linalg.norm(east)
+    north = np.cross(up, east)
+    entries = []
+    for order, photo in enumerate(case.photos):
+        c2w = case.truth.get(photo.stem)
+        if c2w is None:
+            continue
+        seen = c2w[:3, :3].T @ up * np.array([1.0, -1.0, -1.0])  # OpenCV camera axes
+        view = -c2w[:3, 2]
+        heading = np.degrees(np.arctan2(view @ east, view @ north))
+        heading += rng.normal(0, HEADING_NOISE_DEG) + HEADING_DRIFT_DEG * order / len(case.photos)
+        entries.append({"file": photo.name, "order": order,
+                        "up": _turned(seen, abs(rng.normal(0, GRAVITY_NOISE_DEG)), rng).tolist(),
+                        "heading_deg": float(heading % 360.0)})
+    (folder / "capture.json").write_text(json.dumps(
+        {"format": "windowshop-capture", "version": 1, "sensors": "simulated", "photos": entries}))
+    return len(entries)
+
+
+def run_case(case: Case, options: PrepareOptions, sensors: bool = False) -> dict:
+    """prepare on the case's photos (links in a folder of their own), classified and scored;
+    with `sensors`, the phone's capture.json beside them (sensor_capture)."""
     row: dict = {"case": case.name, "given": len(case.photos)}
     if not case.name.endswith("/full"):
         row["photos"] = [p.name for p in case.photos]
@@ -286,6 +335,8 @@ def run_case(case: Case, options: PrepareOptions) -> dict:
         source.mkdir()
         for photo in case.photos:
             (source / photo.name).symlink_to(photo.resolve())
+        if sensors:
+            row["sensor_photos"] = sensor_capture(case, source)
         start = time.perf_counter()
         try:
             prepare(source, out, options, show=False)
@@ -314,6 +365,8 @@ def run_case(case: Case, options: PrepareOptions) -> dict:
         row["outcome"] = "delivered-unscored"
     if "verification" in report:
         row["verification"] = report["verification"]
+    if "priors" in report:
+        row["priors"] = report["priors"]
     return row
 
 
@@ -390,6 +443,8 @@ def main() -> None:
     parser.add_argument("--only", default=None, help="run only cases whose name holds this")
     parser.add_argument("--prepare", action="append", default=[], metavar="KEY=VALUE",
                         help="PrepareOptions override, e.g. masks=false")
+    parser.add_argument("--sensors", action="store_true",
+                        help="give each case the phone's capture.json (module docstring)")
     parser.add_argument("--out", default=None, help="also write the JSON here")
     parser.add_argument("--table", default=None, metavar="JSON",
                         help="only print the table of an earlier run's JSON")
@@ -409,9 +464,10 @@ def main() -> None:
     todo = sorted((c for c in todo if args.only is None or args.only in c.name),
                   key=lambda c: c.name.endswith("/full"))  # the quick subsets first
     results = {**machine(), "worktree": worktree(), "options": dataclasses.asdict(options),
-               "right_deg": RIGHT_DEG, "right_share": RIGHT_SHARE, "cases": {}}
+               "right_deg": RIGHT_DEG, "right_share": RIGHT_SHARE, "sensors": args.sensors,
+               "cases": {}}
     for case in todo:
-        row = run_case(case, options)
+        row = run_case(case, options, args.sensors)
         results["cases"][case.name] = row
         print(json.dumps(row), flush=True)
         if args.out:  # kept as it grows, for a run that is stopped

@@ -147,7 +147,8 @@ def cmd_serve(args: argparse.Namespace) -> None:
     from windowshop.service.settings import ServiceSettings
 
     flags = {"host": args.host, "port": args.port, "data_dir": args.data,
-             "concurrency": args.concurrency, "device": args.device}
+             "concurrency": args.concurrency, "device": args.device,
+             "certfile": args.certfile, "keyfile": args.keyfile}
     settings = ServiceSettings(**{k: v for k, v in flags.items() if v is not None})
     if args.broker is None:
         serve(settings)
@@ -286,6 +287,10 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "(default ./windowshop-data)")
     p.add_argument("--concurrency", type=int, default=None, help="jobs run at once (default 1)")
     p.add_argument("--device", default=None, help="the jobs' device: cpu, cuda (default: CUDA if present)")
+    p.add_argument("--certfile", default=None, metavar="PEM", help="serve HTTPS with this "
+                   "certificate (a phone's browser opens the camera only over HTTPS or on "
+                   "localhost; docs/capture.md)")
+    p.add_argument("--keyfile", default=None, metavar="PEM", help="the certificate's private key")
     p.add_argument("--broker", default=None, metavar="URL", help="send jobs to the workers of this "
                    "Redis broker (redis://HOST:6379/0) instead of the local worker (docs/scaling.md)")
     p.add_argument("--db", default=None, metavar="URL", help="with --broker: the job store's "

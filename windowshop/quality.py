@@ -105,6 +105,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "empty_arcs": [(round(s, 1), round(e, 1)) for s, e in empty_arcs(azimuths)],
         "covered_degrees": render.get("covered_span_degrees"),
         "turntable": render,
+        "priors": (prepared or {}).get("priors"),  # what the phone's sensors gave, up's source
     }
     names = [Path(v.name).name for v in scene.views]
     report["trust"] = trust(names, azimuths, elevations, _doubtful(prepared, metrics), report["verified"])
@@ -180,6 +181,8 @@ def summary_lines(report: dict) -> list[str]:
              + (f"{psnr:.1f} dB on {report['held_out_photos']} photos" if psnr is not None
                 else "n/a (no photo held out)")]
     lines.append(f"  {report['trust']['summary']}")
+    if (report.get("priors") or {}).get("capture"):
+        lines.append(f"  {report['priors']['summary']}")
     if "note" in report:
         lines.append(f"  note: {report['note']}")
     lines += [f"  advice: {tip}" for tip in report["advice"]]

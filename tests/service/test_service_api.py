@@ -139,6 +139,33 @@ def test_photo_names_are_made_safe_and_suffixes_follow_content(client):
     assert names == ["a-002.png", "a.webp", "evil_name.jpg"]
 
 
+def capture_json(names: list[str], **overrides) -> bytes:
+    entries = [{"file": n, "order": i, "up": [0.0, -0.9, -0.43], "heading_deg": 12.0 * i}
+               for i, n in enumerate(names)]
+    return json.dumps({"format": "windowshop-capture", "version": 1, "sensors": "deviceorientation",
+                       "photos": entries, **overrides}).encode()
+
+
+def test_photos_shot_on_the_page_bring_their_capture_json(client):
+    names = [f"capture-{i:03d}.jpg" for i in range(3)]
+    files = [("files", (n, image_bytes(seed=i), "image/jpeg")) for i, n in enumerate(names)]
+    files.append(("files", ("capture.json", capture_json(names), "application/json")))
+    job = client.post("/api/jobs", files=files)
+    assert job.status_code == 201, job.text
+    folder = client.settings.jobs_dir / job.json()["id"] / "input"
+    assert sorted(p.name for p in folder.iterdir()) == ["capture-000.jpg", "capture-001.jpg",
+                                                         "capture-002.jpg", "capture.json"]
+    assert client.get(job.json()["url"]).json()["input"] == "3 photos"  # the JSON is no photo
+    assert json.loads((folder / "capture.json").read_text())["photos"][2]["heading_deg"] == 24.0
+
+
+def test_a_capture_json_that_is_not_the_pages_is_refused(client):
+    files = photos(3) + [("files", ("capture.json", b'{"photos": 3}', "application/json"))]
+    detail = refused(client.post("/api/jobs", files=files), 400, "bad_capture")
+    assert "capture.json" in detail and "windowshop-capture" in detail
+    assert job_folders(client) == []  # nothing of the refused upload is kept
+
+
 def test_heic_photos_from_phones_are_taken(client):
     pytest.importorskip("pillow_heif")
     files = [("files", (f"IMG_{i}.HEIC", image_bytes("HEIF", seed=i), "image/heic")) for i in range(3)]

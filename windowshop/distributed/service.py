@@ -303,8 +303,9 @@ def serve_cluster(settings: ServiceSettings, cluster: ClusterSettings) -> None:
     """`windowshop serve --broker ...` in the foreground until Ctrl-C."""
     import uvicorn
 
+    tls = settings.tls()
     app = create_cluster_app(settings, cluster)
-    print(f"windowshop: serving http://{settings.host}:{settings.port}/ with workers of "
+    print(f"windowshop: serving {settings.scheme}://{settings.host}:{settings.port}/ with workers of "
           f"{cluster.broker} (jobs in {settings.data_dir.resolve()}, store "
           f"{app.state.store.store.engine.url.render_as_string(hide_password=True)})", flush=True)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info")
+    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info", **tls)

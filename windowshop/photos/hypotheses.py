@@ -10,7 +10,8 @@ cheapest first, each verified in turn, until one passes or the time limit
     photos' up        the upright check failed: up from the photos' level instead of the plane
     pruned            the pairs check failed: the contradicting pairs dropped from the
                       matches (pair pruning, as Cui & Tan 2015), mapped again
-    global            the same matches through pycolmap's global mapper (rotation averaging)
+    global            the same matches through pycolmap's global mapper (rotation averaging,
+                      held to the phone's gravity when capture.json gives it)
     without suspects  the photos the checks blame left out, to be reshot
 
 The first that passes is kept; when none does, the best-ranked one is kept only under
@@ -49,6 +50,13 @@ class Search:
     check_placed: Callable  # (SfmResult) -> None, UserError when too few are placed
     deadline: float  # time.perf_counter() by which no new strategy starts
     evidence: Path  # the database of every verified pair, which every hypothesis is held to
+    # the phone's up in each photo's camera frame by image file name (capture.json), and so
+    # where a new hypothesis takes up from: "gravity" with it, else "plane"
+    gravity: dict | None = None
+
+    @property
+    def up(self) -> str:
+        return "gravity" if self.gravity else "plane"
 
 
 @dataclass
@@ -78,6 +86,7 @@ def evaluate(search: Search, hypothesis: Hypothesis) -> Verdict:
     """Verify the poses; if they pass, find the object (prepare.locate) and verify the scene.
     A failure to find the object, or too few photos placed, is a failed check of its own."""
     start = time.perf_counter()
+    hypothesis.gravity = search.gravity
     verdict = _timed(hypothesis)
     if verdict.passed:
         try:
@@ -123,6 +132,9 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
     if mapper == "global":
         options = pycolmap.GlobalPipelineOptions()
         options.random_seed = search.settings.seed
+        if search.gravity:  # rotation averaging held to the phone's gravity (Pan et al. 2024)
+            sfm_.write_gravity(database, search.gravity)
+            options.mapper.rotation_averaging.use_gravity = True
         models = pycolmap.global_mapping(database, search.image_dir, out, options)
         model = max(models.values(), key=lambda r: r.num_reg_images()) if models else None
     else:
@@ -160,15 +172,19 @@ def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | N
         return None
     database = _pruned_database(search, best)
     result = None if database is None else _remapped(search, best, "pruned", database, "incremental")
-    return None if result is None else Hypothesis("pruned", result)
+    return None if result is None else Hypothesis("pruned", result, up=search.up)
 
 
 def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
     if not any(c.name == "pairs" for c in verdict.failed):
-        return None
-    database = _pruned_database(search, best) or search.evidence
+        return None  # a photo whose gravity alone disagrees is left out (without_suspects)
+    database = _pruned_database(search, best)
+    if database is None:  # a copy all the same: the phone's gravity is written into it
+        database = search.work / "database_global.db"
+        shutil.copyfile(search.evidence, database)
+    label = "global with gravity" if search.gravity else "global"
     result = _remapped(search, best, "global", database, "global")
-    return None if result is None else Hypothesis("global", result)
+    return None if result is None else Hypothesis(label, result, up=search.up)
 
 
 def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
@@ -195,7 +211,7 @@ STRATEGIES = (looked_at, photos_up, pruned, global_mapper, without_suspects)
 
 def choose(search: Search, first: sfm_.SfmResult) -> Choice:
     """The first hypothesis to pass the verifier (module docstring), else the best-ranked."""
-    hypothesis = Hypothesis("as mapped", first)
+    hypothesis = Hypothesis("as mapped", first, up=search.up)
     tried = [Tried(hypothesis, evaluate(search, hypothesis))]
     for strategy in STRATEGIES:
         best = max(tried, key=lambda t: t.verdict.rank())

@@ -17,6 +17,7 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 
 from windowshop.errors import UserError
 from windowshop.media import HEIF, HEIF_SUFFIXES, IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_hidden, unzip
+from windowshop.photos.sensors import CAPTURE_FILE, find_capture
 
 MIN_PHOTOS = 3
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
@@ -40,6 +41,7 @@ class Inputs:
     kind: str  # "photos" | "video"
     files: list[Path]
     ignored: list[str] = field(default_factory=list)
+    capture: Path | None = None  # the page's capture.json beside the photos (photos.sensors)
 
 
 @dataclass
@@ -50,7 +52,8 @@ class Dropped:
 
 
 def _is_media(path: PurePosixPath) -> bool:
-    return path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES
+    """Photos, videos and the page's capture.json: what prepare reads of a zip."""
+    return path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES or path.name.lower() == CAPTURE_FILE
 
 
 def _unzip(archive: Path, scratch: Path) -> Path:
@@ -89,8 +92,9 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
     videos = [p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES]
     if not photos and len(videos) == 1:
         return Inputs("video", videos)
-    ignored = [p.name for p in entries if p not in photos]
-    return Inputs("photos", photos, ignored)
+    capture = find_capture(entries)
+    ignored = [p.name for p in entries if p not in photos and p != capture]
+    return Inputs("photos", photos, ignored, capture)
 
 
 def _camera_key(image: Image.Image, size: tuple[int, int]) -> tuple:

@@ -25,4 +25,5 @@ class Located:
     plane: Plane | None  # the support plane, COLMAP frame
     # the masks before they were cut to each other's visual hull (the verifier compares them)
     raw_masks: dict[str, np.ndarray] = field(default_factory=dict)
-    up_source: str = "plane"  # "plane" (its normal), "photos" (their level) or "cameras"
+    up_source: str = "plane"  # "plane" (its normal), "gravity" (the phone's), "photos" (their
+    # level) or "cameras"

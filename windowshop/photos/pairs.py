@@ -8,6 +8,9 @@ chosen by count and capture.
 - "retrieval": each photo with the RETRIEVAL_K photos that look most alike, by a tiny-image
   descriptor (a blurred 16x16 grey thumbnail, zero mean and unit norm; Torralba et al. 2008):
   large unordered sets, with no vocabulary tree to download.
+- "heading": photos shot on the page with the phone's heading (capture.json): each with its next
+  in shooting order and with every photo taken within HEADING_PAIR_DEG of its heading. Photos
+  from opposite sides are never matched, so sides that look alike cannot fold the walk.
 """
 
 from __future__ import annotations
@@ -25,6 +28,9 @@ SEQUENTIAL_OVERLAP = 5
 RETRIEVAL_K = 8  # most alike photos matched with each photo of a large unordered set
 WALK_SHARE = 0.7  # photos whose next is among their SEQUENTIAL_OVERLAP most alike: a walk
 THUMB = 16  # side of the tiny image, pixels
+# Photos this far apart in heading still share surface; a compass that drifts 10-20 degrees
+# over a walk keeps true neighbours within it
+HEADING_PAIR_DEG = 60.0
 MATCHERS = ("exhaustive", "sequential", "retrieval")
 
 
@@ -80,3 +86,17 @@ def image_pairs(count: int, matcher: str, descriptors: np.ndarray | None = None
         alike = _most_alike(descriptors, min(RETRIEVAL_K, count - 1))
         return sorted({(min(i, int(j)), max(i, int(j))) for i in range(count) for j in alike[i]})
     raise ValueError(f"unknown matcher {matcher!r}")
+
+
+def heading_pairs(headings: list[float | None]) -> list[tuple[int, int]]:
+    """Index pairs (i < j) among photos in shooting order with the phone's `headings` (degrees,
+    None where unknown): each photo with its next, those within HEADING_PAIR_DEG of each other,
+    and a photo without heading with its next SEQUENTIAL_OVERLAP."""
+    count = len(headings)
+    chosen = {(i, i + 1) for i in range(count - 1)}
+    chosen |= {(i, j) for i, j in image_pairs(count, "sequential")
+               if headings[i] is None or headings[j] is None}
+    known = [i for i, h in enumerate(headings) if h is not None]
+    chosen |= {(i, j) for a, i in enumerate(known) for j in known[a + 1:]
+               if abs((headings[i] - headings[j] + 180.0) % 360.0 - 180.0) <= HEADING_PAIR_DEG}
+    return sorted(chosen)

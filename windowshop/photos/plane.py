@@ -34,6 +34,7 @@ ABOVE = 3.0  # the object's points stand more than this many tolerances above th
 FLAT_SHARE = 0.95  # more of the points near the object on the plane: nothing stands on it
 UPRIGHT_AGREE = 0.9  # photos whose mean up is this long agree on an up ...
 WALL_ANGLE = 60.0  # ... and a plane further off it (degrees) stands upright: no support
+GRAVITY_DEG = 12.0  # a plane further off the phone's gravity is not what the object stands on
 MIN_OBJECT_POINTS = 20  # fewer points above the plane that most views see: no object
 ADVICE = ("photograph one object standing on a surface, walking around it and keeping it in "
           "the middle of every photo")
@@ -60,7 +61,8 @@ class Isolated:
     plane: Plane | None
     up: np.ndarray  # (3,) unit
     index: np.ndarray  # (Q,) int: which of the points given are the object's
-    up_source: str = "plane"  # or, with no support plane, "photos" (their level) or "cameras"
+    up_source: str = "plane"  # or "gravity" (the phone's), or with no support plane, "photos"
+    # (their level) or "cameras"
 
 
 def capture_scale(cameras: list[Camera]) -> tuple[np.ndarray, float]:
@@ -140,7 +142,7 @@ def _reaches_beyond(found: Plane, near: np.ndarray) -> bool:
 
 
 def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
-            by_points: bool = True) -> Isolated:
+            by_points: bool = True, gravity: np.ndarray | None = None) -> Isolated:
     """Support plane, up and the object's points (see the module docstring) of a capture.
 
     A plane with nothing standing on it (a wall behind the object) is no support: up then
@@ -148,15 +150,18 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
     surface, or too few points that most views see sit where the views meet. Not `by_points`
     (a plain object on a richly textured table, whose points are nearly all the table's), the
     object is wherever the cameras look, its points those there, however few (none: the box
-    around the look-at point that every view sees whole, objectbox.object_box).
+    around the look-at point that every view sees whole, objectbox.object_box). With the
+    phone's `gravity` (world up (3,), windowshop.photos.sensors), a plane more than GRAVITY_DEG
+    off it is no support (a slope, a wall or a pedestal's side), and without one up is gravity.
     """
     plane = fit_support_plane(points, cameras, seed)
     if by_points and plane is not None and plane.inlier_share >= FLAT_SHARE:
         raise UserError(f"no object found: {plane.inlier_share:.0%} of the points around the "
                         f"middle of the photos lie on one flat surface (a wall, a floor or an "
                         f"empty table); {ADVICE}")
-    if plane is not None and _across_upright_photos(plane, cameras):
-        plane = None  # photos that agree on up show a wall or an object's side, not a support
+    if plane is not None and (_across_upright_photos(plane, cameras) if gravity is None
+                              else plane.normal @ gravity < np.cos(np.radians(GRAVITY_DEG))):
+        plane = None  # photos or gravity that agree on up show a wall or a side, not a support
     if plane is not None:
         chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
         if by_points and len(chosen) < MIN_OBJECT_POINTS:  # nothing on it: a wall behind
@@ -167,6 +172,9 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
         raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
                         f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
                         f"{ADVICE}")
+    if gravity is not None:  # a support that agrees with it is what the object stands square on
+        return Isolated(plane=plane, up=gravity if plane is None else plane.normal, index=chosen,
+                        up_source="gravity")
     if plane is not None:
         return Isolated(plane=plane, up=plane.normal, index=chosen)
     up, source = _cameras_up(np.stack([c.c2w for c in cameras]))

@@ -20,6 +20,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
-                               segment)
+                               segment, sensors)
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
 from windowshop.photos.located import Located
@@ -90,8 +91,28 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
         return read_photos(inputs.files, options.max_side, dropped, advance), dropped
 
 
-def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> SfmSettings:
-    """Matcher, shared camera and known intrinsics (scaled to working pixels) for pycolmap."""
+def _priors(inputs: Inputs, photos: list[Photo]) -> sensors.Priors | None:
+    """What the phone knew (capture.json beside the photos), by photo name; the photos are put
+    in shooting order. None without a capture.json."""
+    if inputs.capture is None:
+        return None
+    priors = sensors.read_capture(inputs.capture, {p.source.name: p.name for p in photos})
+    order = {name: i for i, name in enumerate(p.name for p in photos)}
+    photos.sort(key=lambda p: (priors.order.get(p.name, len(photos)), order[p.name]))
+    return priors
+
+
+def _gravity(priors: sensors.Priors | None, photos: list[Photo]) -> dict[str, np.ndarray] | None:
+    """The phone's up of each photo by image file name, when enough photos carry it."""
+    if priors is None or not priors.usable([p.name for p in photos], priors.up):
+        return None
+    return {f"{name}.jpg": up for name, up in priors.up.items()}
+
+
+def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions,
+              priors: sensors.Priors | None = None) -> SfmSettings:
+    """Matcher, shared camera, known intrinsics (scaled to working pixels) and the phone's
+    headings for pycolmap."""
     matcher = options.matcher
     if matcher == "auto" and inputs.kind == "video":
         matcher = "sequential"  # photos: by count and order (windowshop.photos.pairs)
@@ -104,8 +125,11 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions) -> S
             raise UserError("--intrinsics applies to photos of one size, but these differ in size")
         intrinsics = tuple(float(v) * photos[0].scale for v in options.intrinsics)
         single = True
+    headings = None
+    if priors is not None and priors.usable([p.name for p in photos], priors.heading):
+        headings = tuple(priors.heading.get(p.name) for p in photos)
     return SfmSettings(matcher=matcher, intrinsics=intrinsics, single_camera=single,
-                       seed=options.seed, verbose=options.verbose)
+                       seed=options.seed, verbose=options.verbose, headings=headings)
 
 
 def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
@@ -203,18 +227,26 @@ def _search_box(aabb: np.ndarray, floor: bool) -> np.ndarray:
 
 
 def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOptions,
-           up: str = "plane", by_points: bool = True) -> Located:
+           up: str = "plane", by_points: bool = True,
+           gravity: dict[str, np.ndarray] | None = None) -> Located:
     """Support plane, up, object box, normalisation and masks for a reconstruction; `pixels` by
-    image file name. `up`: "plane" (the support plane's normal, else the cameras') or "photos"
-    (the direction their level right axes agree on; the plane then bounds nothing). Not
-    `by_points`: the object is where the cameras look, found by its masks alone
-    (plane.isolate). UserError when no object stands out, or the photos agree on no up when
-    asked for it."""
+    image file name. `up`: "plane" (the support plane's normal, else the cameras'), "gravity"
+    (the phone's: `gravity` holds each photo's up in its camera frame by image file name,
+    windowshop.photos.sensors) or "photos" (the direction their level right axes agree on; the
+    plane then bounds nothing). Not `by_points`: the object is where the cameras look, found
+    by its masks alone (plane.isolate). UserError when no object stands out, or the photos agree
+    on no up when asked for it."""
     posed = output.posed_photos(sfm.reconstruction)
     cameras = [p.camera for p in posed]
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
-    isolated = plane.isolate(points, cameras, options.seed, by_points)
+    measured = None
+    if up == "gravity":
+        measured = sensors.world_up({p.image_name: p.camera.c2w for p in posed}, gravity or {})
+        if measured is None:
+            raise UserError("none of the placed photos carries the phone's gravity")
+    isolated = plane.isolate(points, cameras, options.seed, by_points,
+                             None if measured is None else measured[0])
     up_source, floor = isolated.up_source, isolated.plane
     if up == "photos":
         level = agreed_level(np.stack([c.c2w for c in cameras]))
@@ -298,22 +330,25 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     }
 
 
-def _choose(sfm: SfmResult, photos: list[Photo], work: Path, inputs: Inputs,
-            options: PrepareOptions, shown: dict[str, str]) -> hypotheses.Choice:
+def _choose(sfm: SfmResult, photos: list[Photo], work: Path, settings: SfmSettings,
+            gravity: dict[str, np.ndarray] | None, options: PrepareOptions,
+            shown: dict[str, str]) -> hypotheses.Choice:
     """The verified hypothesis of the scene (windowshop.photos.hypotheses), its object found;
     UserError with what was wrong when none passes, unless `options.force`."""
     search = hypotheses.Search(
         image_dir=work / "images", work=work, names=[f"{p.name}.jpg" for p in photos],
         pixels={f"{p.name}.jpg": p.pixels for p in photos}, options=options,
-        settings=_settings(inputs, photos, options), locate=locate,
+        settings=settings, locate=partial(locate, gravity=gravity),
         check_placed=lambda result: check_placed(result, len(photos), shown),
-        deadline=time.perf_counter() + options.verify_seconds, evidence=sfm.database)
+        deadline=time.perf_counter() + options.verify_seconds, evidence=sfm.database,
+        gravity=gravity)
     choice = hypotheses.choose(search, sfm)
     if not choice.verified and not options.force:
         raise UserError(hypotheses.refusal(choice))
     chosen = choice.chosen.hypothesis
     if chosen.found is None:  # forced past failed poses: the object is still needed
-        chosen.found = locate(chosen.sfm, search.pixels, options, chosen.up, chosen.by_points)
+        chosen.found = search.locate(chosen.sfm, search.pixels, options, chosen.up,
+                                     chosen.by_points)
     return choice
 
 
@@ -339,21 +374,27 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         work = Path(tmp)
         inputs = gather_inputs(source, work)
         photos, dropped = _read(inputs, options, stages)
+        priors = _priors(inputs, photos)
+        settings = _settings(inputs, photos, options, priors)
         image_dir = work / "images"
         image_dir.mkdir()
         for photo in photos:
             output.write_image(work, photo.name, photo.pixels)
         names = [f"{p.name}.jpg" for p in photos]
-        sfm = reconstruct(image_dir, names, work, _settings(inputs, photos, options), stages)
+        sfm = reconstruct(image_dir, names, work, settings, stages)
         shown = {f"{p.name}.jpg": _shown(p) for p in photos}
         check_placed(sfm, len(photos), shown)
         with stages.stage("finding and checking the object"):
-            choice = _choose(sfm, photos, work, inputs, options, shown)
+            choice = _choose(sfm, photos, work, settings, _gravity(priors, photos), options,
+                             shown)
         sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
         with stages.stage("writing the scene", len(found.photos)) as advance:
             transforms = _write(out_dir, image_dir, sfm, found, source, advance)
         summary = _report(source, inputs, photos, dropped, sfm, found, stages)
         summary["verification"] = _verification(choice, options.force)
+        summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
+                                             found.plane is not None,
+                                             "heading" if settings.headings else sfm.matcher)
     report.write_report(out_dir, summary)
     if show:
         print("\n".join(report.summary_lines(summary) + [f"scene written to {out_dir}"]),

@@ -43,6 +43,8 @@ def summary_lines(report: dict) -> list[str]:
         how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "
                "points above the surface it stands on", "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
+    if report.get("priors", {}).get("capture"):
+        lines.append(f"  {report['priors']['summary']}")
     return lines + _verification_lines(report.get("verification"))
 
 

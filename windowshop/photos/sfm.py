@@ -28,6 +28,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pycolmap
 
 from windowshop.photos import fill, pairs
@@ -97,6 +98,9 @@ class SfmSettings:
     # default, as bench_fewphoto scored fruit's 4 such guesses all wrong (uneven steps, a
     # hand-held ring), and a wrong pose spoils the fit more than a missing photo does
     ring_guess: bool = False
+    # the phone's heading of each photo, in the order of the names (None where unknown), from
+    # capture.json: "auto" then matches by heading (windowshop.photos.pairs.heading_pairs)
+    headings: tuple[float | None, ...] | None = None
 
 
 @dataclass
@@ -191,9 +195,13 @@ def first_octave(database: Path, image_dir: Path, names: list[str], settings: Sf
     return 0 if counts and counts[len(counts) // 2] >= RICH_FEATURES else -1
 
 
-def choose_pairs(image_dir: Path, names: list[str], matcher: str
+def choose_pairs(image_dir: Path, names: list[str], matcher: str,
+                 headings: tuple[float | None, ...] | None = None
                  ) -> tuple[str, list[tuple[str, str]]]:
-    """(matcher, name pairs to match): "auto" becomes a matcher by count and order."""
+    """(matcher, name pairs to match): "auto" becomes a matcher by the phone's `headings` when
+    given, else by count and order."""
+    if matcher == "auto" and headings is not None:
+        return "heading", [(names[i], names[j]) for i, j in pairs.heading_pairs(list(headings))]
     descriptors = None
     if matcher == "retrieval" or (matcher == "auto" and len(names) > pairs.EXHAUSTIVE_MAX):
         descriptors = pairs.tiny_descriptors([image_dir / n for n in names])
@@ -292,7 +300,7 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
     quiet_logging(settings.verbose)
     pycolmap.set_random_seed(settings.seed)
     best, best_database, attempts, keypoints = None, None, [], {}
-    matcher, name_pairs = choose_pairs(image_dir, names, settings.matcher)
+    matcher, name_pairs = choose_pairs(image_dir, names, settings.matcher, settings.headings)
     plans = [("default", False, False, False), ("relaxed", False, True, False),
              ("wide", True, True, False), ("lowest", False, True, True)]
     for i, (label, wide, relaxed, lowest) in enumerate(plans):
@@ -342,3 +350,17 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                      pairs=len(name_pairs), guessed=sorted(filled.paired + filled.guessed),
                      ring_method={n: "paired" for n in filled.paired}
                      | {n: "guessed" for n in filled.guessed}, database=best_database)
+
+
+def write_gravity(database: Path, gravity: dict[str, np.ndarray]) -> None:
+    """The phone's gravity of each image (by file name; `gravity` holds its up, camera frame with
+    OpenCV axes) as COLMAP pose priors, which the global mapper's rotation averaging can use
+    (COLMAP's prior holds the direction of gravity itself: down)."""
+    with pycolmap.Database.open(database) as db:
+        for image in db.read_all_images():
+            if image.name not in gravity:
+                continue
+            sensor = pycolmap.sensor_t(pycolmap.SensorType.CAMERA, image.camera_id)
+            db.write_pose_prior(pycolmap.PosePrior(
+                corr_data_id=pycolmap.data_t(sensor, image.image_id),
+                gravity=-np.asarray(gravity[image.name], dtype=np.float64)))

@@ -93,6 +93,8 @@ def serve(settings: ServiceSettings) -> None:
     """Run the service in the foreground (`windowshop serve`) until Ctrl-C."""
     import uvicorn
 
-    print(f"windowshop: serving http://{settings.host}:{settings.port}/ "
+    tls = settings.tls()
+    print(f"windowshop: serving {settings.scheme}://{settings.host}:{settings.port}/ "
           f"(jobs in {settings.data_dir.resolve()})", flush=True)
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info",
+                **tls)

@@ -11,6 +11,7 @@ from pathlib import Path
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from windowshop.config import PipelineConfig
+from windowshop.errors import UserError
 
 
 class ServiceSettings(BaseSettings):
@@ -22,6 +23,27 @@ class ServiceSettings(BaseSettings):
     data_dir: Path = Path("windowshop-data")  # jobs.sqlite3 and one folder per job
     host: str = "127.0.0.1"
     port: int = 8000
+    # HTTPS: a phone's browser opens its camera only for https:// pages (or localhost), so a
+    # phone reaching this machine by its LAN address needs a certificate (docs/capture.md)
+    certfile: Path | None = None
+    keyfile: Path | None = None
+
+    @property
+    def scheme(self) -> str:
+        return "https" if self.certfile else "http"
+
+    def tls(self) -> dict:
+        """uvicorn's TLS arguments; UserError when only one of the files is given or is missing."""
+        if self.certfile is None and self.keyfile is None:
+            return {}
+        if self.certfile is None or self.keyfile is None:
+            raise UserError("HTTPS needs both --certfile and --keyfile (a certificate and its "
+                            "private key, PEM files)")
+        for path in (self.certfile, self.keyfile):
+            if not Path(path).is_file():
+                raise UserError(f"{path}: no such file; give the PEM certificate and key "
+                                f"(docs/capture.md shows how to make a self-signed pair)")
+        return {"ssl_certfile": str(self.certfile), "ssl_keyfile": str(self.keyfile)}
 
     # Uploads (checked by content, see uploads.py).
     max_files: int = 200  # files per job

@@ -1,6 +1,7 @@
 """Checks on what a job is made from, by content and never by name.
 
-An upload is photos (JPEG, PNG, WebP, HEIC when pillow-heif is installed), one video (MP4/MOV,
+An upload is photos (JPEG, PNG, WebP, HEIC when pillow-heif is installed; with the page's
+capture.json of the phone's sensors beside them when shot on the page), one video (MP4/MOV,
 WebM/MKV, AVI: probed by decoding its first frame with ffmpeg) or one zip (photos, or an already
 posed scene: images plus the scene's JSON/text/NumPy/binary files). Every refusal is an
 `UploadRefused` carrying the HTTP status, a short code and a message that names the file.
@@ -19,7 +20,9 @@ import imageio_ffmpeg
 from PIL import Image, UnidentifiedImageError
 
 from windowshop import media
+from windowshop.errors import UserError
 from windowshop.media import HEIF, Refused, ZipLimits
+from windowshop.photos.sensors import CAPTURE_FILE, read_capture
 from windowshop.service.settings import ServiceSettings
 
 IMAGE_FORMATS = {"JPEG": ".jpg", "PNG": ".png", "WEBP": ".webp", "HEIF": ".heic"}
@@ -158,6 +161,8 @@ def check_upload(parts: list[tuple[Path, str]], job_dir: Path,
     if not parts:
         raise UploadRefused(400, "no_files", "no files were sent: add photos, a video or a zip in "
                             "the form field 'files'")
+    capture = _capture_part(parts)
+    parts = [p for p in parts if p is not capture]
     kinds = []
     for path, name in parts:
         with open(path, "rb") as f:
@@ -169,7 +174,10 @@ def check_upload(parts: list[tuple[Path, str]], job_dir: Path,
     inputs = job_dir / "input"
     inputs.mkdir(parents=True, exist_ok=True)
     if set(kinds) == {"image"}:
-        return _take_photos(parts, inputs, settings)
+        checked = _take_photos(parts, inputs, settings)
+        if capture is not None:  # the phone's sensors, read by prepare beside the photos
+            shutil.move(capture[0], inputs / CAPTURE_FILE)
+        return checked
     if len(parts) == 1 and kinds[0] == "video":
         meta = check_video(parts[0][0], repr(parts[0][1]), settings)
         dest = inputs / (safe_stem(parts[0][1], "video") + video_suffix(parts[0][0]))
@@ -180,6 +188,19 @@ def check_upload(parts: list[tuple[Path, str]], job_dir: Path,
         return unpack_zip(parts[0][0], parts[0][1], inputs, settings)
     raise UploadRefused(400, "mixed_upload", "send either photos, or one video, or one zip, not "
                         f"a mix ({len(parts)} files: {', '.join(sorted(set(kinds)))})")
+
+
+def _capture_part(parts: list[tuple[Path, str]]) -> tuple[Path, str] | None:
+    """The page's capture.json among the photos (windowshop.photos.sensors), checked."""
+    part = next((p for p in parts if Path(p[1]).name.lower() == CAPTURE_FILE), None)
+    if part is None:
+        return None
+    try:
+        read_capture(part[0], {})
+    except UserError as err:
+        message = str(err).replace(str(part[0]), CAPTURE_FILE)
+        raise UploadRefused(400, "bad_capture", message) from None
+    return part
 
 
 def _take_photos(parts: list[tuple[Path, str]], inputs: Path,

@@ -11,6 +11,8 @@ no masks to compare) in a module of its own:
                  coherence, Hernandez et al. 2007): a wrong pose carves the object away
     upright      the support plane's normal against the photos' own up (photos are taken
                  level, so their right axes are horizontal)
+    gravity      each photo's gravity from the phone (capture.json), carried into the world by
+                 its pose, against the other photos'
     viewpoints   distinct photos, far apart in shooting order, stacked on one viewpoint (a few
                  photos of an object whose sides look alike, folded)
 
@@ -19,7 +21,7 @@ no masks to compare) in a module of its own:
 
 from __future__ import annotations
 
-from windowshop.photos.verify import pairs, silhouettes, upright, viewpoints
+from windowshop.photos.verify import gravity, pairs, silhouettes, upright, viewpoints
 from windowshop.photos.verify.types import Check, Hypothesis, Verdict
 
 __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
@@ -28,5 +30,5 @@ __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
 def verify(hypothesis: Hypothesis) -> Verdict:
     """Every check that applies to `hypothesis`."""
     checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check,
-                                               viewpoints.check))
+                                               gravity.check, viewpoints.check))
     return Verdict([c for c in checks if c is not None])

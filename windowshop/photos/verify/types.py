@@ -42,8 +42,10 @@ class Hypothesis:
     found: Located | None = None
     seconds: float = 0.0  # what making and checking it cost (finding its object included) ...
     check_seconds: float = 0.0  # ... of which the checks themselves
-    up: str = "plane"  # how prepare.locate finds up: "plane" or "photos" ...
+    up: str = "plane"  # how prepare.locate finds up: "plane", "gravity" or "photos" ...
     by_points: bool = True  # ... and the object: by its sparse points, or where the cameras look
+    # the phone's up in each photo's camera frame by image file name (capture.json), or None
+    gravity: dict | None = None
 
 
 @dataclass

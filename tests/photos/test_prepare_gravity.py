@@ -1,0 +1,100 @@
+"""`prepare` with the phone's gravity (capture.json): beer_can photos turned by known rolls (0, 90,
+180 and 270 degrees), each with the up its phone would have measured, must come out upright; a
+photo whose gravity lies is caught by the gravity check and left out.
+
+The true up of each photo is the beer_can's own: the level its upright video frames agree on
+(scene.cameras.photos_level of the published poses), carried into each camera and turned with
+the photo. Without capture.json the same rolled photos have no level to agree on and no support
+plane stands out at this size: up then comes from the cameras' mean and the scene is delivered
+some 130 degrees off (measured once; not asserted, since a better fallback would change it).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from windowshop.config import PrepareOptions
+from windowshop.photos import sensors
+from windowshop.photos.prepare import prepare
+from windowshop.scene.cameras import photos_level
+from shared_data import DATA
+from test_prepare_poses import _reference, beer_sample
+
+ROLLS = (0, 90, 180, 270)
+PHOTOS = 12
+UP_MEDIAN_DEG = 3.0  # the delivered up in each photo against the phone's, median ...
+UP_MAX_DEG = 10.0  # ... and worst (the video frames' own rolls spread a few degrees about the level)
+
+
+def rolled_up(c2w: np.ndarray, up: np.ndarray, roll: float) -> np.ndarray:
+    """World `up` in the OpenCV frame of the camera `c2w` (OpenGL), for its photo turned
+    counter-clockwise by `roll` degrees (PIL's Image.rotate)."""
+    x, y, z = c2w[:3, :3].T @ up * np.array([1.0, -1.0, -1.0])
+    c, s = np.cos(np.radians(roll)), np.sin(np.radians(roll))
+    return np.array([x * c + y * s, -x * s + y * c, z])
+
+
+def rolled_capture(folder, lie: str | None = None) -> dict[str, np.ndarray]:
+    """PHOTOS rolled beer_can photos and their capture.json in `folder`; the photo `lie`'s
+    gravity is turned 40 degrees. Returns each photo's true up by stem."""
+    folder.mkdir()
+    reference = _reference(DATA / "beer_can" / "sparse" / "0")
+    level, _ = photos_level(np.stack(list(reference.values())))
+    entries, truth = [], {}
+    for i, path in enumerate(beer_sample(PHOTOS)):
+        roll = ROLLS[i % len(ROLLS)]
+        with Image.open(path) as image:
+            image.rotate(roll, expand=True).save(folder / path.name, quality=92)
+        truth[path.stem] = up = rolled_up(reference[path.stem], level, roll)
+        if path.stem == lie:
+            turn = np.radians(40.0)
+            up = np.array([up[0], up[1] * np.cos(turn) - up[2] * np.sin(turn),
+                           up[1] * np.sin(turn) + up[2] * np.cos(turn)])
+        entries.append({"file": path.name, "order": i, "up": up.tolist(), "heading_deg": None})
+    (folder / sensors.CAPTURE_FILE).write_text(json.dumps(
+        {"format": sensors.FORMAT, "version": 1, "sensors": "devicemotion", "photos": entries}))
+    return truth
+
+
+def delivered_up_errors(scene_dir, truth: dict[str, np.ndarray]) -> dict[str, float]:
+    """Degrees between the delivered up (+z) in each photo's camera and its true up."""
+    errors = {}
+    for frame in json.loads((scene_dir / "transforms.json").read_text())["frames"]:
+        c2w = np.array(frame["transform_matrix"])
+        seen = c2w[:3, :3].T @ np.array([0.0, 0.0, 1.0]) * np.array([1.0, -1.0, -1.0])
+        stem = frame["file_path"].rsplit("/", 1)[-1].rsplit(".", 1)[0]
+        errors[stem] = float(np.degrees(np.arccos(np.clip(seen @ truth[stem], -1.0, 1.0))))
+    return errors
+
+
+def test_rolled_photos_with_the_phones_gravity_come_out_upright(tmp_path):
+    truth = rolled_capture(tmp_path / "photos")
+    result = prepare(tmp_path / "photos", tmp_path / "scene", PrepareOptions(max_side=480),
+                     show=False)
+    priors = result.report["priors"]
+    assert priors["up"] == "gravity" and priors["gravity"] == PHOTOS, priors
+    assert priors["summary"].startswith("up from the phone's gravity")
+    assert result.report["verification"]["verified"]
+    errors = delivered_up_errors(tmp_path / "scene", truth)
+    assert len(errors) >= PHOTOS - 1
+    assert np.median(list(errors.values())) <= UP_MEDIAN_DEG, errors
+    assert max(errors.values()) <= UP_MAX_DEG, errors
+
+
+def test_a_photo_whose_gravity_lies_is_caught_and_left_out(tmp_path):
+    liar = beer_sample(PHOTOS)[5].stem
+    truth = rolled_capture(tmp_path / "photos", lie=liar)
+    result = prepare(tmp_path / "photos", tmp_path / "scene", PrepareOptions(max_side=480),
+                     show=False)
+    verification = result.report["verification"]
+    first = verification["tried"][0]
+    gravity = next(c for c in first["checks"] if c["name"] == "gravity")
+    assert not gravity["passed"] and gravity["suspects"] == [f"{liar}.jpg"], gravity
+    assert verification["verified"] and "without suspects" in verification["chosen"], verification
+    assert liar not in {v["name"] for v in result.report["views"]}
+    errors = delivered_up_errors(tmp_path / "scene", truth)
+    assert np.median(list(errors.values())) <= UP_MEDIAN_DEG, errors

@@ -80,9 +80,16 @@ def test_heading_pairs_never_match_opposite_sides():
     headings = [float(h) for h in range(0, 360, 45)] + [None]  # 8 photos round, one without
     chosen = pairs.heading_pairs(headings)
     assert (0, 1) in chosen and (0, 7) in chosen  # neighbours; the ring closes (0 and 315)
-    assert (0, 2) not in chosen and (0, 4) not in chosen  # 90 and 180 degrees apart
+    assert (0, 2) in chosen and (1, 7) in chosen  # 90 degrees apart: a side seen obliquely
+    assert (0, 3) not in chosen and (0, 4) not in chosen  # 135 and 180: opposite sides
     assert {(i, 8) for i in range(3, 8)} <= set(chosen)  # the one without: its 5 before it
     assert (2, 8) not in chosen
+
+
+def test_only_photos_dense_in_heading_are_matched_by_heading():
+    assert pairs.dense([float(h) for h in range(0, 360, 12)])  # the page: every 12 degrees
+    assert not pairs.dense([float(h) for h in range(0, 360, 45)])  # 8 round: every pair needed
+    assert not pairs.dense([None] * 10 + [0.0, 10.0])
 
 
 def test_gravity_is_written_as_colmap_pose_priors(tmp_path):

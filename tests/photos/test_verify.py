@@ -8,11 +8,13 @@ import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
+from windowshop.photos import hypotheses
 from windowshop.photos.ingest import Dropped, read_photos
 from windowshop.photos.output import write_image
 from windowshop.photos.progress import Stages
 from windowshop.photos.sfm import SfmSettings, reconstruct
-from windowshop.photos.verify import Hypothesis, pairs, silhouettes, upright, verify
+from windowshop.photos.verify import (Check, Hypothesis, Verdict, pairs, silhouettes, upright,
+                                      verify)
 from windowshop.rays import project
 from windowshop.scene.cameras import LEVEL_SPREAD_DEG, agreed_level, look_at, photos_level
 from windowshop.scene.types import Camera
@@ -151,3 +153,17 @@ def test_held_out_check_reads_the_refined_psnr_against_its_threshold():
     high = heldout.check({"psnr": 12.0, "psnr_refined": heldout.MIN_PSNR + 0.5, "test_views": 2})
     assert not low.passed and high.passed
     assert "2 held-out photos" in low.detail and "12.0 dB before refining" in low.detail
+
+
+def test_a_refusal_reports_the_failure_of_the_latest_of_equally_ranked_hypotheses():
+    def failed(label: str, detail: str) -> hypotheses.Tried:
+        return hypotheses.Tried(Hypothesis(label, sfm=None), Verdict([Check("object", 0, 1, detail)]))
+
+    tried = [failed("as mapped", "no object found: 95% of the points lie on one flat surface"),
+             failed("where the photos look", "no object found where the photos look: the "
+                    "outlines found in them do not agree on one")]
+    choice = hypotheses.Choice(hypotheses.fallback(tried), tried)
+    assert hypotheses.refusal(choice).startswith("no object found where the photos look")
+    better = [tried[0], hypotheses.Tried(Hypothesis("pruned", sfm=None), Verdict(
+        [Check("pairs", 1, 0, "agree"), Check("object", 0, 1, "x")]))]
+    assert hypotheses.fallback(better) is better[1]  # as many failed, more checks made

@@ -224,7 +224,14 @@ def choose(search: Search, first: sfm_.SfmResult) -> Choice:
         made.seconds = time.perf_counter() - start
         tried.append(Tried(made, evaluate(search, made)))
     best = next((t for t in tried if t.verdict.passed), None)
-    return Choice(best or max(tried, key=lambda t: t.verdict.rank()), tried)
+    return Choice(best or fallback(tried), tried)
+
+
+def fallback(tried: list[Tried]) -> Tried:
+    """The best-ranked of hypotheses that all failed; among equals the later, which was made to
+    answer the earlier's failure, so that its own failure is the one reported (where the photos
+    look failing for its outlines, not the "no object found" it answered)."""
+    return max(reversed(tried), key=lambda t: t.verdict.rank())
 
 
 def refusal(choice: Choice) -> str:

@@ -28,9 +28,16 @@ SEQUENTIAL_OVERLAP = 5
 RETRIEVAL_K = 8  # most alike photos matched with each photo of a large unordered set
 WALK_SHARE = 0.7  # photos whose next is among their SEQUENTIAL_OVERLAP most alike: a walk
 THUMB = 16  # side of the tiny image, pixels
-# Photos this far apart in heading still share surface; a compass that drifts 10-20 degrees
-# over a walk keeps true neighbours within it
-HEADING_PAIR_DEG = 60.0
+# Photos this far apart in heading may still share surface (a side seen obliquely, the top);
+# further apart they face opposite sides, whose alike prints fold a walk (the doppelganger
+# box's contradicted pairs are all at 159-180 deg), and a compass drifting 10-20 degrees over
+# a walk moves no pair across it by much
+HEADING_PAIR_DEG = 100.0
+# ... but only for photos this close in heading (the median step round the circle; the page
+# shoots every 12 deg): a sparse ring needs every pair it has. fruit's and temple's 8-photo rings
+# (45 deg steps) placed 2-3 of 8 with pairs within 60 deg, and temple/8@0 lost the points that
+# told its object (11 of 20 needed) within 100 deg (bench_verify --sensors)
+DENSE_STEP_DEG = 30.0
 MATCHERS = ("exhaustive", "sequential", "retrieval")
 
 
@@ -86,6 +93,16 @@ def image_pairs(count: int, matcher: str, descriptors: np.ndarray | None = None
         alike = _most_alike(descriptors, min(RETRIEVAL_K, count - 1))
         return sorted({(min(i, int(j)), max(i, int(j))) for i in range(count) for j in alike[i]})
     raise ValueError(f"unknown matcher {matcher!r}")
+
+
+def dense(headings: list[float | None]) -> bool:
+    """Whether the photos' known `headings` step round the circle by at most DENSE_STEP_DEG
+    (median), so that matching only neighbours in heading loses little."""
+    known = np.sort([h % 360.0 for h in headings if h is not None])
+    if len(known) < 3:
+        return False
+    steps = np.diff(np.append(known, known[0] + 360.0))
+    return float(np.median(steps)) <= DENSE_STEP_DEG
 
 
 def heading_pairs(headings: list[float | None]) -> list[tuple[int, int]]:

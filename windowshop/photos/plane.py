@@ -53,6 +53,12 @@ class Plane:
         """(N,) signed distance of `points` (N, 3) above the plane."""
         return points @ self.normal - self.offset
 
+    def z_at(self, rotation: np.ndarray, xy: np.ndarray) -> float:
+        """The plane's z at `xy` (2,) in the frame `rotation` (3, 3) turns the world into, whose
+        +z is near the normal (up from gravity, within GRAVITY_DEG of it)."""
+        n = rotation @ self.normal
+        return float((self.offset - n[:2] @ xy) / n[2])
+
 
 @dataclass(frozen=True)
 class Isolated:
@@ -152,7 +158,7 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
     object is wherever the cameras look, its points those there, however few (none: the box
     around the look-at point that every view sees whole, objectbox.object_box). With the
     phone's `gravity` (world up (3,), windowshop.photos.sensors), a plane more than GRAVITY_DEG
-    off it is no support (a slope, a wall or a pedestal's side), and without one up is gravity.
+    off it is no support (a slope, a wall or a pedestal's side), and up is gravity.
     """
     plane = fit_support_plane(points, cameras, seed)
     if by_points and plane is not None and plane.inlier_share >= FLAT_SHARE:
@@ -172,9 +178,8 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
         raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
                         f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
                         f"{ADVICE}")
-    if gravity is not None:  # a support that agrees with it is what the object stands square on
-        return Isolated(plane=plane, up=gravity if plane is None else plane.normal, index=chosen,
-                        up_source="gravity")
+    if gravity is not None:  # a phone's gravity is truer than a plane fitted to sparse points
+        return Isolated(plane=plane, up=gravity, index=chosen, up_source="gravity")
     if plane is not None:
         return Isolated(plane=plane, up=plane.normal, index=chosen)
     up, source = _cameras_up(np.stack([c.c2w for c in cameras]))

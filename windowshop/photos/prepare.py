@@ -259,8 +259,8 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     own = points[isolated.index] if by_points else points[:0]
     lo, hi = objectbox.object_box(own, cameras, rotation,
                                   None if floor is None else (floor.normal, floor.offset))
-    if floor is not None:  # the object stands on the plane: the box's floor
-        lo[2] = floor.offset + floor.tolerance
+    if floor is not None:  # the object stands on the plane: the box's floor, under its middle
+        lo[2] = floor.z_at(rotation, (lo[:2] + hi[:2]) / 2) + floor.tolerance
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
     found, kind, raw = {}, "none", {}
@@ -382,6 +382,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
             output.write_image(work, photo.name, photo.pixels)
         names = [f"{p.name}.jpg" for p in photos]
         sfm = reconstruct(image_dir, names, work, settings, stages)
+        matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
         shown = {f"{p.name}.jpg": _shown(p) for p in photos}
         check_placed(sfm, len(photos), shown)
         with stages.stage("finding and checking the object"):
@@ -394,7 +395,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         summary["verification"] = _verification(choice, options.force)
         summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
                                              found.plane is not None,
-                                             "heading" if settings.headings else sfm.matcher)
+                                             matcher)
     report.write_report(out_dir, summary)
     if show:
         print("\n".join(report.summary_lines(summary) + [f"scene written to {out_dir}"]),

@@ -199,8 +199,8 @@ def choose_pairs(image_dir: Path, names: list[str], matcher: str,
                  headings: tuple[float | None, ...] | None = None
                  ) -> tuple[str, list[tuple[str, str]]]:
     """(matcher, name pairs to match): "auto" becomes a matcher by the phone's `headings` when
-    given, else by count and order."""
-    if matcher == "auto" and headings is not None:
+    they are given and dense (pairs.dense), else by count and order."""
+    if matcher == "auto" and headings is not None and pairs.dense(list(headings)):
         return "heading", [(names[i], names[j]) for i, j in pairs.heading_pairs(list(headings))]
     descriptors = None
     if matcher == "retrieval" or (matcher == "auto" and len(names) > pairs.EXHAUSTIVE_MAX):

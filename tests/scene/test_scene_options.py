@@ -8,7 +8,7 @@ from windowshop.config import SceneOptions
 from windowshop.rays import project
 from windowshop.scene import load_scene
 from windowshop.scene.loading import target_size
-from windowshop.scene.cameras import up_vector
+from windowshop.scene.cameras import look_at, up_vector
 from windowshop.scene.normalize import rotation_to_z
 from windowshop.scene.selection import assign_splits, evenly_spaced, farthest_directions
 from windowshop.scene.synthetic import BOXES, SPHERES, orbit_cameras, synthetic_scene
@@ -105,6 +105,20 @@ def test_up_vector_and_rotation():
     assert up @ np.array([0.0, 0.6, 0.8]) > 0.99
     np.testing.assert_allclose(rotation_to_z(up) @ up, [0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(rotation_to_z(np.array([0.0, 0.0, -1.0])) @ [0, 0, -1], [0, 0, 1])
+
+
+def test_photos_at_mixed_rolls_get_the_ring_normal_with_the_cameras_above():
+    # a ring looking down at the object, each photo turned by 0, 90, 180 or 270 degrees (EXIF
+    # lost): the ups cancel, so up is the ring's normal, signed by where the cameras stand
+    c2ws = []
+    for i, azimuth in enumerate(np.radians(np.arange(0.0, 360.0, 30.0))):
+        c2w = look_at(np.array([3 * np.cos(azimuth), 3 * np.sin(azimuth), 1.0]), np.zeros(3),
+                      np.array([0.0, 0.0, 1.0]))
+        turn = np.radians(90.0 * (i % 4))  # about the view axis (OpenGL z)
+        roll = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]])
+        c2w[:3, :3] = c2w[:3, :3] @ roll
+        c2ws.append(c2w)
+    np.testing.assert_allclose(up_vector(np.stack(c2ws)), [0, 0, 1], atol=1e-9)
 
 
 def object_points() -> np.ndarray:

@@ -87,8 +87,8 @@ def up_vector(c2ws: np.ndarray, method: Literal["mean", "level"] = "mean") -> np
     """(3,) unit "up" of a capture, cameras `c2ws` (N, 4, 4).
 
     "mean" (normalising a scene): the mean camera up, or the normal of the camera ring when the
-    ups cancel out (e.g. a gantry whose lower views are upside down), signed to agree with the
-    majority of the camera ups.
+    ups cancel out (a gantry whose lower views are upside down, photos at mixed rolls), signed so
+    that the cameras stand above the point they look at.
     "level" (the turntable's orbit): the direction most perpendicular to every camera's right
     axis, since photos are taken with the camera level, signed like the mean up; the mean up
     when the right axes do not spread over a plane (cameras at a single azimuth).
@@ -103,7 +103,10 @@ def _mean_up(c2ws: np.ndarray) -> np.ndarray:
         return mean / max(np.linalg.norm(mean), 1e-12)
     centres = c2ws[:, :3, 3]
     normal = np.linalg.svd(centres - centres.mean(0))[2][-1]
-    return normal if np.sum(np.sign(ups @ normal)) >= 0 else -normal
+    # signed so that the cameras stand above what they look at, as round an object on a table
+    # (photos at mixed rolls, their EXIF lost, have no majority up: 0/90/180/270-degree beer_can
+    # frames came out 130 degrees off by the ups' signs)
+    return normal if (centres.mean(0) - nearest_point_to_axes(c2ws)) @ normal >= 0 else -normal
 
 
 def _level_up(c2ws: np.ndarray) -> np.ndarray:

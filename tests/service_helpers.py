@@ -1,11 +1,13 @@
-"""A real `windowshop serve` in a process of its own, and a tiny posed scene to give it.
+"""A real `windowshop serve` in a process of its own, a tiny posed scene to give it, and Debian's
+chromium for the browser tests (driven by Playwright).
 
-Used by the restart test and the browser test, which must run the real pipeline.
+Used by the restart test and the browser tests, which must run the real pipeline.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -15,6 +17,23 @@ import zipfile
 from pathlib import Path
 
 import httpx
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+needs_chromium = pytest.mark.skipif(shutil.which(CHROMIUM) is None,
+                                    reason=f"{CHROMIUM} is absent (apt-get install chromium)")
+
+
+def wait_js(page, expression: str, timeout: float = 30.0, poll: float = 0.1) -> None:
+    """Poll `expression` in `page` until true (page.wait_for_function would eval() in the page,
+    which the page's Content-Security-Policy rightly forbids)."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"never true: {expression}"
+        time.sleep(poll)
+
 
 # Service settings that make a job take seconds: few training steps, few small frames, a small model.
 FAST_JOB = {

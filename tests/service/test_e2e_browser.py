@@ -9,22 +9,17 @@ the page, where the share link opened in another browser shows neither cancel no
 
 from __future__ import annotations
 
-import shutil
-import time
 from pathlib import Path
 
 import httpx
 import pytest
 
-from service_helpers import LiveService, posed_scene_zip
+from service_helpers import (CHROMIUM, CHROMIUM_ARGS, LiveService, needs_chromium, posed_scene_zip,
+                             wait_js)
 
-CHROMIUM = "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
 
-pytestmark = pytest.mark.skipif(shutil.which(CHROMIUM) is None,
-                                reason=f"{CHROMIUM} is absent (apt-get install chromium)")
+pytestmark = needs_chromium
 
 
 @pytest.fixture(scope="module")
@@ -39,18 +34,10 @@ def browser():
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         yield browser
         browser.close()
 
-
-def wait_js(page, expression: str, timeout: float = 30.0) -> None:
-    """Poll `expression` until true (page.wait_for_function would eval() in the page, which the
-    page's Content-Security-Policy rightly forbids)."""
-    deadline = time.monotonic() + timeout
-    while not page.evaluate(expression):
-        assert time.monotonic() < deadline, f"never true: {expression}"
-        time.sleep(0.1)
 
 
 # the share of the 3D view's pixels that are not its white background

@@ -17,6 +17,7 @@ const STATE_TEXT = {
 };
 
 let chosen = [];      // files picked, dropped or shot, not yet sent
+let captured = new Set();  // those of them shot on the page (capture.js): photos and capture.json
 let pollTimer = null;  // the running job's next status request
 
 // ---- the jobs of this browser --------------------------------------------------------------
@@ -76,15 +77,33 @@ async function showMyJobs() {
 function addFiles(files) {
   chosen = chosen.concat(Array.from(files));
   const bytes = chosen.reduce((sum, f) => sum + f.size, 0);
-  $("chosen-text").textContent =
-    `${chosen.length} file${chosen.length === 1 ? "" : "s"} chosen (${(bytes / 1e6).toFixed(1)} MB)`;
+  $("chosen-text").textContent = `${chosenText(chosen)} (${(bytes / 1e6).toFixed(1)} MB)`;
   $("chosen").hidden = chosen.length === 0;
   $("send").disabled = chosen.length === 0;
   $("new-error").hidden = true;
 }
 
+// A capture shot on the page replaces the previous one (it goes on from it: capture.js keeps its
+// photos until cleared), since one capture.json goes with an upload.
+function addCapture(files) {
+  chosen = chosen.filter((f) => !captured.has(f));
+  captured = new Set(files);
+  addFiles(files);
+}
+
+const isCaptureJson = (f) => captured.has(f) && f.name === "capture.json";
+
+function chosenText(files) {
+  const json = files.filter(isCaptureJson).length;
+  const n = files.length - json;
+  if (json) return `${n} photo${n === 1 ? "" : "s"} + capture.json`;
+  return `${n} file${n === 1 ? "" : "s"} chosen`;
+}
+
 function clearFiles() {
   chosen = [];
+  captured = new Set();
+  window.windowshopCapture.reset();
   $("chosen").hidden = true;
   $("send").disabled = true;
 }
@@ -93,7 +112,7 @@ function describe(files) {
   const videos = files.filter((f) => f.type.startsWith("video/")).length;
   if (videos) return "A video";
   if (files.length === 1 && /\.zip$/i.test(files[0].name)) return files[0].name;
-  return `${files.length} photos`;
+  return `${files.filter((f) => !isCaptureJson(f)).length} photos`;
 }
 
 function showError(element, text) {
@@ -248,6 +267,10 @@ async function showReport(links) {
   trust.hidden = !report.trust;
   trust.textContent = report.trust ? report.trust.summary : "";
   trust.dataset.level = report.trust ? report.trust.level : "";
+  // what the phone's sensors gave (a capture shot on the page): up from gravity, headings
+  const priors = $("quality-priors");
+  priors.hidden = !(report.priors && report.priors.summary);
+  priors.textContent = priors.hidden ? "" : report.priors.summary;
   $("quality-note").hidden = !report.note;
   $("quality-note").textContent = report.note || "";
   const list = $("advice");
@@ -355,6 +378,7 @@ function setUp() {
     drop.classList.remove("over");
     addFiles(e.dataTransfer.files);
   };
+  $("capture-start").onclick = () => window.windowshopCapture.open({ onDone: addCapture });
   $("clear").onclick = clearFiles;
   $("send").onclick = upload;
   $("share").onclick = share;

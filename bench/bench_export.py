@@ -73,26 +73,35 @@ def supersampled(vertices: np.ndarray, faces: np.ndarray, camera, uv: np.ndarray
     return image.reshape(camera.height, k, camera.width, k, 3).mean((1, 3))
 
 
-def quality_row(run_dir: Path, views: int, work: Path) -> dict:
-    """The exported GLB of `run_dir` against its scene's held-out views (see the docstring)."""
-    glb = work / "lego.glb"
-    asset = export_command(str(run_dir), str(glb), None, ExportOptions())
-    run = load_run(run_dir)
-    scene = load_scene(run.scene_source, run.scene_options)
+def load_glb(glb: Path, run) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (V, 3) in the scene's normalised frame, faces (F, 3), uv (V, 2) glTF's, texture,
+    the file's unit vertex normals (V, 3) turned into that frame)."""
     loaded = trimesh.load(glb, force="mesh", process=False)
     to_normalised = run.transform @ np.array(json.loads(side_file(glb).read_text())["model_to_source"])
     vertices = apply(to_normalised, np.asarray(loaded.vertices))
     uv = np.asarray(loaded.visual.uv).copy()
     uv[:, 1] = 1.0 - uv[:, 1]  # trimesh's v = 0 at the bottom; glTF's (and the rasteriser's) top
     texture = np.asarray(loaded.visual.material.baseColorTexture.convert("RGB"))
+    normals = np.asarray(loaded.vertex_normals) @ to_normalised[:3, :3].T
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return vertices, np.asarray(loaded.faces), uv, texture, normals
+
+
+def quality_row(run_dir: Path, views: int, work: Path) -> dict:
+    """The exported GLB of `run_dir` against its scene's held-out views (see the docstring)."""
+    glb = work / "lego.glb"
+    asset = export_command(str(run_dir), str(glb), None, ExportOptions())
+    run = load_run(run_dir)
+    scene = load_scene(run.scene_source, run.scene_options)
+    vertices, faces, uv, texture, _ = load_glb(glb, run)
     ious, mesh_psnr, smooth_psnr, field_psnr = [], [], [], []
     for view in scene.split("test")[:views]:
-        image, silhouette = render_mesh(vertices, np.asarray(loaded.faces), view.camera,
+        image, silhouette = render_mesh(vertices, faces, view.camera,
                                         (1.0, 1.0, 1.0), uv=uv, texture=texture)
         alpha = view.alpha > 0.5
         ious.append(float((alpha & silhouette).sum() / max((alpha | silhouette).sum(), 1)))
         mesh_psnr.append(psnr(image, view.image))
-        smooth_psnr.append(psnr(supersampled(vertices, np.asarray(loaded.faces), view.camera, uv,
+        smooth_psnr.append(psnr(supersampled(vertices, faces, view.camera, uv,
                                              texture, SUPERSAMPLE), view.image))
         field_psnr.append(psnr(render_camera(run.model, view.camera).rgb, view.image))
     return {"row": "quality", "run": str(run_dir), "step": run.step, "views": len(ious),

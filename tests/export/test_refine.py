@@ -61,3 +61,26 @@ def test_a_wrong_texture_is_refined_to_the_photographed_one(wrong):
     _, drawn = photographed(refined, [0.6, -0.6, 1.7])
     assert np.abs(drawn - seen).mean() < 0.2 * np.abs(photographed(start, [0.6, -0.6, 1.7])[1]
                                                       - seen).mean()
+
+
+def test_the_room_behind_a_masked_photo_lends_the_texture_no_colour():
+    """Photos of the square over a black room, their masks saying where the square is: the mesh
+    drawn a little too large lies partly over the room, whose black must not darken its texture
+    (it counts as white there, as the masked object is shown)."""
+    truth = np.full((SIZE, SIZE, 3), 0.8)
+    shots = photos(truth)
+    masked_images, alphas = [], []
+    for camera, image in zip(shots.cameras, shots.images):
+        _, inside = render_mesh(*square(0.0, 0.5), camera, colours=np.zeros((4, 3), np.uint8))
+        alphas.append(inside.astype(np.float32))
+        masked_images.append(np.where(inside[..., None], image, 0.0).astype(np.float32))
+    vertices, faces = square(0.0, 0.6)  # the mesh 20% larger than the photographed square
+    start = np.full((SIZE, SIZE, 3), 0.8, dtype=np.float32)
+    refined = refine_texture(vertices, faces, UV, start, Photos(shots.cameras, masked_images, alphas))
+    unmasked = refine_texture(vertices, faces, UV, start,
+                              Photos(shots.cameras, masked_images, [None] * len(alphas)))
+    rim = np.ones((SIZE, SIZE), bool)
+    rim[5:-5, 5:-5] = False
+    rim[:2], rim[-2:], rim[:, :2], rim[:, -2:] = False, False, False, False  # chart padding
+    assert unmasked[rim].mean() < 0.7  # without the masks the room darkens the rim
+    assert refined[rim].mean() > 0.78

@@ -4,13 +4,18 @@
                       -> density lattice over the object's box (mesh.sample_volume)
                       -> the surface's level from the field's silhouettes (level.choose_level)
                       -> the lattice carved by the photos' masks, where they have any (carve)
-                      -> marching cubes, largest pieces, decimation (mesh.object_mesh)
+                      -> the side no photo saw closed by the hull of the seen part (unseen),
+                         a contact shadow's slab and the floor layers cut away (support)
+                      -> marching cubes, largest pieces, decimation (mesh.object_mesh), the
+                         base put flat on the floor (support.flatten_base)
                       -> moved to where the photos agree (settle)
                       -> UVs and the base colour baked from the photos, the field's where no
-                         photo sees the surface (texture, photos)
-                      -> moved again to match all the photos and their masks (tune)
+                         bake photo sees the surface, grey on the side none saw (texture, photos)
+                      -> moved again to match all the photos and their masks (tune), then
+                         smoothed (mesh.taubin: the tune roughens it)
                       -> that texture refined by least squares against all the photos (refine)
-                      -> the model frame: +Y up, standing at the origin (frame.model_frame)
+                      -> the model frame: +Y up, standing at the origin (frame.model_frame),
+                         and the orbit a viewer may take: the covered arc (orbit)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
 `windowshop video` calls `export_models` to write GLB and USDZ from one asset.
@@ -29,6 +34,7 @@ import torch
 from windowshop.config import ExportOptions
 from windowshop.errors import UserError
 from windowshop.export.asset import Asset
+from windowshop.export.photos import spread
 
 FORMATS = ("glb", "usdz", "ply")
 BAKE_DEPTHS = (0.5, 1.5)  # colours are read this many lattice cells under the surface, averaged
@@ -63,7 +69,11 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.carve import CARVE_VIEWS, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
-    from windowshop.export.mesh import object_mesh, sample_volume, vertex_normals
+    from windowshop.export.mesh import (Mesh, neighbour_angles, object_mesh, sample_volume,
+                                        taubin, vertex_normals)
+    from windowshop.export.support import flatten_base, plane_found, prepared_report
+    from windowshop.export.unseen import weight_at
+    from windowshop.export.orbit import covered_orbit
     from windowshop.export.photos import training_photos
     from windowshop.export.refine import refine_texture
     from windowshop.export.settle import settle
@@ -91,23 +101,38 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     if masked is not None and masked.cameras and np.isfinite(level):
         volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
         lap("carve")
+    prepared = prepared_report(run.scene_source) is not None
+    grid, unseen, unseen_share, cut = closed_lattice(volume.cpu().numpy(), level, aabb,
+                                                     run.train_cameras, options, prepared, lap)
+    volume = torch.as_tensor(grid, device=volume.device)
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
-    lap("mesh")
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
+    if cut is not None:
+        mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
+    lap("mesh")
     every_photo = photos if options.bake_views > 0 else None  # the refinement takes them all
     photos = photos.spread(options.bake_views) if photos and options.bake_views > 0 else None
     if photos is not None and options.settle:
         mesh = settle(mesh, photos, cell)
         lap("settle")
     depths = tuple(d * cell for d in BAKE_DEPTHS)
+    angles = {}  # mean angle between neighbouring faces (degrees): how rough the surface is
     uv = texture = None
+    fade = None if unseen is None or not unseen.any() else (
+        lambda points: weight_at(unseen, aabb, points))  # the unseen side's colour fades to grey
     if options.texture > 0:
         unwrapped = tex.unwrap(mesh, options.texture)
         lap("unwrap")
-        image = tex.bake_image(run.model, unwrapped, options.texture, depths, photos, cell)
+        image = tex.bake_image(run.model, unwrapped, options.texture, depths, photos, cell,
+                               unseen=fade)
         lap("bake")
         if every_photo is not None and options.tune:
+            angles["before tune"] = round(float(neighbour_angles(mesh).mean()), 2)
             mesh = tune_surface(mesh, unwrapped.uv[unwrapped.faces], image, every_photo, cell)
+            angles["tuned"] = round(float(neighbour_angles(mesh).mean()), 2)
+            mesh = taubin(mesh, options.smooth)
+            if cut is not None:
+                mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
             unwrapped = tex.moved(unwrapped, mesh)
             lap("tune")
         if every_photo is not None and options.refine:
@@ -122,20 +147,53 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         surface, normals = mesh, vertex_normals(mesh)
         vertices, faces = mesh.vertices, mesh.faces
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)
+    lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
+    orbit = covered_orbit(run.train_cameras, (lo + hi) / 2)
     colours = None
     if vertex_colours or texture is None:
         occluders = None if photos is None else tex.surface_samples(surface)
         colours = np.round(255 * tex.surface_colour(run.model, vertices, normals, depths, photos,
-                                                    cell, occluders))
+                                                    cell, occluders, unseen=fade))
         lap("vertex colours")
     info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
             "triangles": int(len(faces)), "texture": 0 if texture is None else texture.shape[0],
-            "photos": 0 if photos is None else len(photos.cameras), "seconds": seconds}
+            "photos": 0 if photos is None else len(photos.cameras),
+            "unseen_share": round(unseen_share, 4), "support_cut": cut is not None,
+            "support_plane": plane_found(run.scene_source),
+            "neighbour_angle": {**angles, "delivered": round(float(neighbour_angles(mesh).mean()), 2)},
+            "orbit": orbit, "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
                  normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),
                  uv=None if uv is None else uv.astype(np.float32), texture=texture,
                  vertex_colours=None if colours is None else colours.astype(np.uint8),
                  roughness=options.roughness, frame=frame, info=info)
+
+
+def closed_lattice(grid: np.ndarray, level: float, aabb: np.ndarray, cameras: list,
+                   options: ExportOptions, prepared: bool, lap
+                   ) -> tuple[np.ndarray, np.ndarray | None, float, tuple[float, float] | None]:
+    """(densities `grid` (X, Y, Z) over `aabb` with the side no photo saw closed (unseen.py) and,
+    for a `prepared` capture, the support's slab cut (support.py), as `options` ask; the unseen
+    weight (X, Y, Z) or None, the share of the lattice's surface points no photo saw, (cut z,
+    floor z) or None). The training `cameras` see the surface; `lap(stage)` times each step."""
+    from windowshop.export.support import cut_support
+    from windowshop.export.unseen import (close_unseen, hull_occupancy, surface_visibility,
+                                          unseen_weight)
+
+    if not np.isfinite(level) or float(grid.max()) <= level:
+        return grid, None, 0.0, None  # marching cubes says what is wrong
+    unseen, share, cut = None, 0.0, None
+    if options.close_unseen:
+        views = [cameras[i] for i in spread(options.bake_views or 24, len(cameras))]
+        visibility = surface_visibility(grid > level, aabb, views)
+        unseen, share = unseen_weight(visibility, grid.shape), visibility.unseen_share
+        grid = close_unseen(grid, level, unseen, hull_occupancy(visibility, grid.shape, aabb, unseen))
+        lap("unseen")
+    if options.cut_support and prepared:
+        grid, cut_z, floor_z = cut_support(grid, level, aabb)
+        cut = (cut_z, floor_z)
+        lap("support")
+    return grid, unseen, share, cut
 
 
 def write_asset(asset: Asset, path: Path, fmt: str) -> None:

@@ -150,3 +150,38 @@ def object_mesh(volume: torch.Tensor, level: float, aabb: np.ndarray, triangles:
     if len(mesh.faces) == 0:
         raise UserError("the field's surface has no triangles: train longer, or check the photos")
     return decimate(keep_largest(mesh, keep_share), triangles)
+
+
+def neighbour_angles(mesh: Mesh) -> np.ndarray:
+    """(E,) degrees between the normals of the two faces across each edge they share."""
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    normals = np.cross(b - a, c - a)
+    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-20)
+    f = mesh.faces
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(f)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    pair = np.flatnonzero((edges[1:] == edges[:-1]).all(1))  # an edge's two faces, side by side
+    cos = np.einsum("ij,ij->i", normals[owner[pair]], normals[owner[pair + 1]])
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def taubin(mesh: Mesh, steps: int, shrink: float = 0.5, inflate: float = -0.53,
+           fixed: np.ndarray | None = None) -> Mesh:
+    """`mesh` smoothed by Taubin's lambda|mu filter (`steps` pairs of a step towards the
+    neighbours' mean and one back out, so the surface smooths without shrinking); `fixed` (V,)
+    bool vertices stay."""
+    from windowshop.export.settle import neighbour_mean
+
+    if steps <= 0:
+        return mesh
+    mean = neighbour_mean(mesh)
+    x = mesh.vertices.copy()
+    for _ in range(steps):
+        for factor in (shrink, inflate):
+            step = factor * (mean @ x - x)
+            if fixed is not None:
+                step[fixed] = 0.0
+            x = x + step
+    return Mesh(x, mesh.faces)

@@ -21,6 +21,7 @@ reads the background.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -30,6 +31,7 @@ from scipy.sparse import csgraph
 
 from windowshop.export.mesh import Mesh, vertex_normals
 from windowshop.export.photos import Photos, blend_with_field, low_weight, project_photos
+from windowshop.export.unseen import neutral_colour
 from windowshop.model import RadianceModel
 
 AXES = np.concatenate([np.eye(3), -np.eye(3)])  # (6, 3) the directions charts face
@@ -190,16 +192,20 @@ def bake_texture(model: RadianceModel, unwrapped: Unwrapped, size: int,
 
 def bake_image(model: RadianceModel, unwrapped: Unwrapped, size: int,
                depths: tuple[float, ...], photos: Photos | None = None,
-               tolerance: float = 0.0) -> np.ndarray:
+               tolerance: float = 0.0, unseen: Callable[[np.ndarray], np.ndarray] | None = None
+               ) -> np.ndarray:
     """(B, B, 3) float32 in [0, 1]: the base-colour texture of `unwrapped` at its bake size B:
     from the `photos` where they see the surface (photos.py; `tolerance` its depth test's), else
     from the field (its colours read at `depths` under the surface; see the module docstring).
-    Photos coarser than a `size` texture are baked at a coarser size (bake_size)."""
+    Photos coarser than a `size` texture are baked at a coarser size (bake_size). `unseen`
+    (N, 3) points -> (N,) weights in [0, 1]: how far a point lies in the side no photo saw,
+    where the colour fades to a neutral grey (unseen.neutral_colour)."""
     bake = size if photos is None else bake_size(unwrapped, size, photos)
     ids = rasterise(unwrapped.uv, unwrapped.faces, bake)
     index, points, normals = texel_surface(unwrapped, ids)
     image = np.zeros((bake * bake, 3), dtype=np.float32)
-    image[index] = surface_colour(model, points, normals, depths, photos, tolerance)
+    image[index] = surface_colour(model, points, normals, depths, photos, tolerance,
+                                  unseen=unseen)
     empty = (ids < 0)
     nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     return image.reshape(bake, bake, 3)[nearest[0], nearest[1]]
@@ -244,14 +250,22 @@ def surface_samples(mesh: Mesh) -> np.ndarray:
 
 def surface_colour(model: RadianceModel, points: np.ndarray, normals: np.ndarray,
                    depths: tuple[float, ...], photos: Photos | None, tolerance: float,
-                   occluders: np.ndarray | None = None) -> np.ndarray:
+                   occluders: np.ndarray | None = None,
+                   unseen: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """(N, 3) in [0, 1]: the base colour at surface `points` (N, 3) with outward `normals`: the
     photos' where they see it well enough, the field's where they do not (or no photos).
     `occluders` (M, 3) sample the whole surface densely (photos.project_photos; default: the
-    points, which texels are)."""
+    points, which texels are); `unseen` as bake_image's."""
     if photos is None:
         return field_colour(model, points, normals, depths)
     total, weight = project_photos(points, normals, photos, tolerance, occluders)
     low = low_weight(weight)
-    return blend_with_field(total, weight, field_colour(model, points[low], normals[low], depths),
-                            low)
+    colour = blend_with_field(total, weight, field_colour(model, points[low], normals[low], depths),
+                              low)
+    if unseen is None:
+        return colour
+    fade = unseen(points)
+    if not fade.any():
+        return colour
+    grey = neutral_colour(colour, weight)
+    return (1.0 - fade[:, None]) * colour + fade[:, None] * grey

@@ -4,6 +4,11 @@
 // and turn it with the arrow keys. canvas.dataset.state becomes "ready" once it is drawn, or
 // "failed" (with canvas.dataset.error) when the file or the browser cannot show it. Only
 // showModel is global.
+// The GLB's scene extras may hold windowshop.orbit (windowshop/export/orbit.py): the side to open
+// on (`start`, degrees of yaw: the camera at (sin, ., cos) about +Y from the model's centre) and,
+// when the photos did not go all round (`limited`), the yaw range `min`..`max` (the covered arc
+// plus a margin) the view may turn through, said in a note beside it. canvas.dataset.yaw holds
+// the current yaw in degrees (the browser test reads it).
 
 (() => {  // a scope of its own: app.js shares the page's globals
 "use strict";
@@ -193,6 +198,42 @@ function upload(gl, p, glb, image) {
   };
 }
 
+// ---- the orbit the photos support ------------------------------------------------------------
+
+function orbitOf(glb) {
+  const scenes = glb.json.scenes || [];
+  const scene = scenes[glb.json.scene || 0] || {};
+  const extras = scene.extras && scene.extras.windowshop;
+  return (extras && extras.orbit) || null;
+}
+
+const RADIANS = Math.PI / 180;
+
+function yawLimit(orbit) {
+  if (!orbit || !orbit.limited) return (yaw) => yaw;
+  const [lo, hi] = [orbit.min * RADIANS, orbit.max * RADIANS];
+  return (yaw) => Math.max(lo, Math.min(hi, yaw));
+}
+
+function showNote(canvas, orbit) {
+  const id = `${canvas.id || "model-view"}-note`;
+  let note = document.getElementById(id);
+  if (!orbit || !orbit.limited) {
+    if (note) note.hidden = true;
+    return;
+  }
+  if (!note) {
+    note = document.createElement("p");
+    note.id = id;
+    note.className = "model-note";
+    canvas.insertAdjacentElement("afterend", note);
+  }
+  note.hidden = false;
+  note.textContent = `The photos show ${Math.round(orbit.covered_degrees)}° around the item: ` +
+    `the 3D view turns across that side (and ${Math.round(orbit.margin)}° past it); ` +
+    "the side nobody photographed is closed in plain grey.";
+}
+
 function controls(canvas, camera, redraw) {
   const pointers = new Map();
   let pinch = 0;
@@ -213,7 +254,7 @@ function controls(canvas, camera, redraw) {
       if (pinch) camera.distance *= pinch / apart;
       pinch = apart;
     } else {
-      camera.yaw -= (e.clientX - x) * 0.01;
+      camera.yaw = camera.limit(camera.yaw - (e.clientX - x) * 0.01);
       camera.pitch = Math.max(-1.5, Math.min(1.5, camera.pitch + (e.clientY - y) * 0.01));
     }
     redraw();
@@ -226,7 +267,7 @@ function controls(canvas, camera, redraw) {
   canvas.addEventListener("keydown", (e) => {
     const turn = { ArrowLeft: 0.2, ArrowRight: -0.2 }[e.key];
     if (turn === undefined) return;
-    camera.yaw += turn;
+    camera.yaw = camera.limit(camera.yaw + turn);
     redraw();
   });
 }
@@ -244,7 +285,17 @@ async function showModel(canvas, url) {
     const p = program(gl);
     gl.useProgram(p);
     const mesh = upload(gl, p, glb, image);
-    const camera = { yaw: 0.6, pitch: 0.35, distance: 2.6 * mesh.radius };
+    const orbit = orbitOf(glb);
+    const limit = yawLimit(orbit);
+    const camera = { yaw: limit(orbit ? orbit.start * RADIANS : 0.6), pitch: 0.35,
+                     distance: 2.6 * mesh.radius, limit };
+    if (orbit && orbit.limited) {
+      [canvas.dataset.yawMin, canvas.dataset.yawMax] = [orbit.min, orbit.max];
+    } else {
+      delete canvas.dataset.yawMin;
+      delete canvas.dataset.yawMax;
+    }
+    showNote(canvas, orbit);
     let pending = false;
     const draw = () => {
       pending = false;
@@ -264,6 +315,7 @@ async function showModel(canvas, url) {
                           multiply(projection, lookAt(eye, c)));
       gl.uniform3fv(gl.getUniformLocation(p, "eye"), eye.map((v, i) => v - c[i]));
       gl.drawElements(gl.TRIANGLES, mesh.count, mesh.type, 0);
+      canvas.dataset.yaw = (camera.yaw / RADIANS).toFixed(1);
       canvas.dataset.state = "ready";
     };
     const redraw = () => { if (!pending) { pending = true; requestAnimationFrame(draw); } };

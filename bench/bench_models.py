@@ -1,0 +1,297 @@
+"""The delivered 3D model of every shared real capture at the defaults (issue 37), as JSON lines.
+
+    python bench/bench_models.py [--rows dtu_skull beer_can kermit fruit] [--photos 20]
+                                 [--work /work/exp37] [--reuse] [--pictures docs/models]
+
+Per capture: `windowshop video` at the defaults on the photos bench_real.py picks (its run folder
+kept under --work/<capture>; --reuse re-exports that run with the current export instead of
+running the video again), then the delivered GLB, read back with trimesh and put in the scene's
+frame through its side file, drawn with windowshop.export.raster at the run's held-out photos:
+- psnr_glb / psnr_field: PSNR inside the prepared mask (alpha > 0.5) over white (pixels the
+  GLB misses count as white), and the field's own there;
+- iou: the GLB's silhouette against the mask;
+- faces_outside: faces whose centre lies outside the covered region's hull plus a margin: the
+  convex hull of the delivered faces some training photo saw (as below), grown by MARGIN of the
+  box's diagonal (shards on the side no photo saw stand outside it); outside_mask_hull: the same
+  against the convex hull of the training masks' visual hull (a voxel outside a photo counts as
+  background there);
+- unseen_share: the share of the delivered surface's area that no training photo saw (a face is
+  seen when its centre faces a training camera, projects into its photo and is the nearest
+  surface there), and unseen_angle / seen_angle: the mean angle (degrees) between neighbouring
+  faces there and on the seen part (how torn the unseen side is);
+- psnr_lit: the same PSNR with the GLB drawn lit as a viewer's default light does (half from the
+  camera, half ambient) with glTF's metal-free GGX specular at each of ROUGHNESS, its exposure
+  fitted: whether the material adds a highlight the baked texture already holds;
+- the GLB's bytes and triangles, the export's seconds (and its stages), the covered arc;
+- a 2x2 picture of the GLB from four sides (the best-photographed side first, then 90 degrees
+  apart), lit from the camera, into --pictures/<capture>.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import trimesh
+from PIL import Image
+from scipy.spatial import Delaunay
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_export import load_glb  # noqa: E402
+from bench_real import captures, masked_psnr  # noqa: E402
+from provenance import machine  # noqa: E402
+from windowshop.config import ExportOptions, PipelineConfig  # noqa: E402
+from windowshop.export.command import export_models, side_file  # noqa: E402
+from windowshop.export.raster import rasterise, render_mesh  # noqa: E402
+from windowshop.fit.checkpoint import load_run  # noqa: E402
+from windowshop.fit.evaluate import held_out_views, target_image  # noqa: E402
+from windowshop.metrics import psnr  # noqa: E402
+from windowshop.scene import load_scene  # noqa: E402
+from windowshop.scene.cameras import look_at  # noqa: E402
+from windowshop.scene.hull import hull_points  # noqa: E402
+from windowshop.scene.types import Camera  # noqa: E402
+
+MARGIN = 0.03  # of the box's diagonal: how far outside the covered hull a face may lie
+SEEN_SIDE = 320  # training photos are drawn this many pixels on their longer side for visibility
+PICTURE_SIDE = 200  # pixels a side of each of the picture's four views
+TORN = 60.0  # degrees between neighbouring faces that make their edge a tear
+ROUGHNESS = (0.5, 0.8, 1.0)  # the material's roughness, drawn lit at the held-out photos
+
+
+def lit(image: np.ndarray, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
+        camera: Camera, roughness: float) -> tuple[np.ndarray, np.ndarray]:
+    """(the mesh's base colour `image` (H, W, 3) lit as a viewer's default light does: a light at
+    the camera (half of it) over an even ambient half, with glTF's metal-free GGX specular (F0
+    0.04) at `roughness`; the mask of drawn pixels)."""
+    raster = rasterise(torch.as_tensor(vertices), torch.as_tensor(faces, dtype=torch.int64), camera)
+    face, bary = raster.face.numpy(), raster.bary.numpy()
+    hit = face >= 0
+    n = np.einsum("pk,pkc->pc", bary[hit], normals[faces[face[hit]]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    points = np.einsum("pk,pkc->pc", bary[hit], vertices[faces[face[hit]]])
+    v = camera.center - points
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    cos = np.clip(np.abs(np.einsum("pc,pc->p", n, v)), 1e-4, 1.0)  # light = view: h = n.v
+    a2 = roughness ** 4
+    d = a2 / (np.pi * (cos * cos * (a2 - 1) + 1) ** 2)
+    k = (roughness + 1) ** 2 / 8
+    g = (cos / (cos * (1 - k) + k)) ** 2
+    specular = 0.04 * d * g / (4 * cos * cos) * cos  # times n.l, light of radiance 1
+    out = image.copy()
+    out[hit] = image[hit] * (0.5 + 0.5 * cos)[:, None] * 0.96 + 0.5 * np.pi * specular[:, None]
+    return np.clip(out, 0, 1), hit
+
+
+def small(camera: Camera, side: int) -> Camera:
+    scale = side / max(camera.width, camera.height)
+    return camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+
+
+def seen_faces(vertices: np.ndarray, faces: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """(F,) bool: faces whose centre some camera sees (faces it, in its image, nearest there)."""
+    v = torch.as_tensor(vertices, dtype=torch.float64)
+    f = torch.as_tensor(faces, dtype=torch.int64)
+    tri = vertices[faces]
+    centres = tri.mean(1)
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    seen = np.zeros(len(faces), bool)
+    tolerance = 0.01 * float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    for camera in cameras:
+        cam = small(camera, SEEN_SIDE)
+        raster = rasterise(v, f, cam)
+        face = raster.face.numpy()
+        hit = face >= 0
+        bary = raster.bary.numpy()
+        points = np.zeros((cam.height, cam.width, 3))
+        points[hit] = np.einsum("pk,pkc->pc", bary[hit], tri[face[hit]])
+        eye = cam.center
+        depth = np.full((cam.height, cam.width), np.inf)
+        depth[hit] = np.linalg.norm(points[hit] - eye, axis=-1)
+        w2c = np.linalg.inv(cam.c2w)
+        local = centres @ w2c[:3, :3].T + w2c[:3, 3]
+        z = -local[:, 2]
+        front = (z > 1e-6) & (np.einsum("fc,fc->f", normals, eye - centres) > 0)
+        u = np.floor(cam.fx * local[:, 0] / np.maximum(z, 1e-9) + cam.cx).astype(int)
+        r = np.floor(-cam.fy * local[:, 1] / np.maximum(z, 1e-9) + cam.cy).astype(int)
+        inside = front & (u >= 0) & (r >= 0) & (u < cam.width) & (r < cam.height)
+        idx = np.nonzero(inside)[0]
+        near = np.linalg.norm(centres[idx] - eye, axis=-1) <= depth[r[idx], u[idx]] + tolerance
+        seen[idx[near]] = True
+    return seen
+
+
+def neighbour_angles(vertices: np.ndarray, faces: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(angles (E,) degrees between the faces across each shared edge, the two faces (E, 2), the
+    edges' lengths (E,))."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # the texture's seams joined again
+    edges = mesh.vertices[mesh.face_adjacency_edges]
+    return (np.degrees(mesh.face_adjacency_angles), mesh.face_adjacency,
+            np.linalg.norm(edges[:, 0] - edges[:, 1], axis=1))
+
+
+def covered_hull(run, scene) -> Delaunay | None:
+    """The convex hull of the training masks' visual hull, grown by MARGIN of the box's diagonal."""
+    train = [v for v in scene.split("train") if v.alpha is not None]
+    lo, hi = np.asarray(scene.aabb, dtype=float)
+    points = hull_points([v.camera for v in train], [v.alpha for v in train], (lo + hi) / 2,
+                         float(np.max(hi - lo)) / 2 * 1.1)
+    if points is None:
+        return None
+    return grown_hull(points, MARGIN * float(np.linalg.norm(hi - lo)))
+
+
+def grown_hull(points: np.ndarray, grow: float) -> Delaunay:
+    """The convex hull of `points` (N, 3), its corners moved `grow` away from its centre."""
+    centre = points.mean(0)
+    hull = trimesh.convex.convex_hull(points)
+    grown = hull.vertices + grow * (hull.vertices - centre) / np.maximum(
+        np.linalg.norm(hull.vertices - centre, axis=1, keepdims=True), 1e-9)
+    return Delaunay(grown)
+
+
+def picture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, texture: np.ndarray,
+            start_deg: float, out: Path) -> None:
+    """A 2x2 picture of the textured mesh (normalised frame, z up) from azimuths start + 0, 90,
+    180, 270 degrees at 20 degrees elevation, lit from the camera."""
+    lo, hi = vertices.min(0), vertices.max(0)
+    centre, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    tiles = []
+    for k in range(4):
+        az, el = np.radians(start_deg + 90 * k), np.radians(20.0)
+        eye = centre + 3.0 * radius * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
+                                                np.sin(el)])
+        focal = PICTURE_SIDE / 2 / np.tan(np.arcsin(1 / 3.0)) * 0.95
+        camera = Camera(fx=focal, fy=focal, cx=PICTURE_SIDE / 2, cy=PICTURE_SIDE / 2,
+                        width=PICTURE_SIDE, height=PICTURE_SIDE, c2w=look_at(eye, centre, [0, 0, 1]))
+        image, _ = render_mesh(vertices, faces, camera, (1.0, 1.0, 1.0), uv=uv, texture=texture)
+        face = rasterise(torch.as_tensor(vertices), torch.as_tensor(faces, dtype=torch.int64),
+                         camera).face.numpy()
+        hit = face >= 0
+        light = (eye - centre) / np.linalg.norm(eye - centre)
+        lambert = np.abs(normals[face[hit]] @ light)
+        image[hit] *= (0.45 + 0.55 * lambert)[:, None]
+        tiles.append(np.clip(image * 255 + 0.5, 0, 255).astype(np.uint8))
+    grid = np.concatenate([np.concatenate(tiles[:2], 1), np.concatenate(tiles[2:], 1)], 0)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(grid).save(out, optimize=True)
+
+
+def best_azimuth(scene) -> float:
+    """Degrees of azimuth (about +z from +x, through the box's centre) facing most training photos."""
+    from windowshop.video.coverage import best_covered_frame
+
+    lo, hi = np.asarray(scene.aabb, dtype=float)
+    offsets = np.stack([v.camera.center for v in scene.split("train")]) - (lo + hi) / 2
+    azimuths = np.degrees(np.arctan2(offsets[:, 1], offsets[:, 0])) % 360
+    candidates = np.arange(0.0, 360.0, 2.0)
+    return float(candidates[best_covered_frame(candidates, azimuths)])
+
+
+def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: float) -> dict:
+    """The figures of the docstring for the GLB at `folder`/spin.glb of the run beside it."""
+    glb = folder / "spin.glb"
+    run = load_run(folder / "spin_work" / "run")
+    scene = load_scene(run.scene_source, run.scene_options)
+    side = json.loads(side_file(glb).read_text())
+    vertices, faces, uv, texture, normals = load_glb(glb, run)
+    cache = folder / "field_psnr.json"
+    if cache.is_file():
+        field = json.loads(cache.read_text())["psnr_field"]
+    else:
+        field = masked_psnr(run, scene)
+        cache.write_text(json.dumps({"psnr_field": field}))
+    glb_scores, ious, lit_scores = [], [], {r: [] for r in ROUGHNESS}
+    for view in held_out_views(scene):
+        image, silhouette = render_mesh(vertices, faces, view.camera, (1.0, 1.0, 1.0), uv=uv,
+                                        texture=texture)
+        inside = view.alpha > 0.5
+        truth = target_image(view, scene.background)
+        glb_scores.append(psnr(image[inside], truth[inside]))
+        for r in ROUGHNESS:  # lit, its exposure fitted to the photo (a viewer's is arbitrary)
+            shaded, _ = lit(image, vertices, faces, normals, view.camera, r)
+            x, y = shaded[inside].ravel(), truth[inside].ravel()
+            gain = float(x @ y / max(x @ x, 1e-12))
+            lit_scores[r].append(psnr(np.clip(shaded[inside] * gain, 0, 1), truth[inside]))
+        ious.append(float((inside & silhouette).sum() / max((inside | silhouette).sum(), 1)))
+    hull = covered_hull(run, scene)
+    centres = vertices[faces].mean(1)
+    outside_mask = -1 if hull is None else int((hull.find_simplex(centres) < 0).sum())
+    seen = seen_faces(vertices, faces, [v.camera for v in scene.split("train")])
+    lo, hi = np.asarray(scene.aabb, dtype=float)
+    outside = int((grown_hull(centres[seen], MARGIN * float(np.linalg.norm(hi - lo)))
+                   .find_simplex(centres) < 0).sum())
+    area = trimesh.Trimesh(vertices, faces, process=False).area_faces
+    angles, pairs, lengths = neighbour_angles(vertices, faces)
+    unseen_pair = ~seen[pairs].all(1)
+    torn = lengths * (angles > TORN)
+    orbit = side.get("orbit", {})
+    if pictures is not None:
+        picture(vertices, faces, uv, texture, best_azimuth(scene), pictures / f"{name}.png")
+    return {"capture": name, "held_out": len(glb_scores),
+            "psnr_glb": round(float(np.mean(glb_scores)), 2), "psnr_field": round(field, 2),
+            "gap_db": round(field - float(np.mean(glb_scores)), 2),
+            "psnr_lit": {str(r): round(float(np.mean(v)), 2) for r, v in lit_scores.items()},
+            "iou": round(float(np.mean(ious)), 4), "iou_min": round(float(np.min(ious)), 4),
+            "faces_outside": outside, "outside_mask_hull": outside_mask,
+            "unseen_share": round(float(area[~seen].sum() / area.sum()), 4),
+            "unseen_angle": round(float(angles[unseen_pair].mean()), 1) if unseen_pair.any() else None,
+            "seen_angle": round(float(angles[~unseen_pair].mean()), 1),
+            "mean_angle": round(float(angles.mean()), 1),
+            "unseen_torn": round(float(torn[unseen_pair].sum() / max(lengths[unseen_pair].sum(), 1e-12)), 4),
+            "seen_torn": round(float(torn[~unseen_pair].sum() / max(lengths[~unseen_pair].sum(), 1e-12)), 4),
+            "glb_mb": round(glb.stat().st_size / 1e6, 2), "triangles": int(len(faces)),
+            "export_seconds": round(export_seconds, 2), "stages": side.get("seconds"),
+            "covered_degrees": orbit.get("covered_degrees"), "orbit_limited": orbit.get("limited"),
+            "export_angles": side.get("neighbour_angle")}
+
+
+def produce(name: str, photos: list[Path], work: Path, reuse: bool) -> float:
+    """Run `windowshop video` at the defaults into `work` (or re-export its run); export seconds."""
+    from windowshop.pipeline import make_video
+
+    folder = work / name
+    if reuse and (folder / "spin_work" / "run").is_dir():
+        start = time.perf_counter()
+        export_models(folder / "spin_work" / "run", [folder / "spin.glb", folder / "spin.usdz"],
+                      ExportOptions())
+        return time.perf_counter() - start
+    (folder / "photos").mkdir(parents=True, exist_ok=True)
+    for path in photos:
+        link = folder / "photos" / path.name
+        if not link.exists():
+            link.symlink_to(path)
+    (folder / "field_psnr.json").unlink(missing_ok=True)
+    result = make_video(folder / "photos", folder / "spin.mp4", PipelineConfig(), show=False)
+    return result.seconds["export"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", nargs="+", default=["dtu_skull", "beer_can", "kermit", "fruit"])
+    parser.add_argument("--photos", type=int, default=20)
+    parser.add_argument("--work", type=Path, default=Path("/work/exp37"))
+    parser.add_argument("--reuse", action="store_true", help="re-export the kept runs")
+    parser.add_argument("--pictures", type=Path, default=None, help="folder for <capture>.png")
+    args = parser.parse_args()
+    torch.manual_seed(0)
+    photos = captures(args.photos)
+    print(json.dumps(machine()), flush=True)
+    for name in args.rows:
+        seconds = produce(name, photos[name], args.work, args.reuse)
+        print(json.dumps(evaluate(name, args.work / name, args.pictures, seconds)), flush=True)
+    print(json.dumps({"load_average_end": list(os.getloadavg())}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

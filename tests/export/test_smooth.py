@@ -1,0 +1,32 @@
+"""Taubin smoothing (mesh.taubin) and the roughness it is measured by (mesh.neighbour_angles)."""
+
+import numpy as np
+import trimesh
+
+from windowshop.export.mesh import Mesh, neighbour_angles, taubin
+
+
+def noisy_sphere() -> Mesh:
+    sphere = trimesh.creation.icosphere(4, 1.0)
+    rng = np.random.default_rng(0)
+    vertices = sphere.vertices * (1 + 0.01 * rng.standard_normal(len(sphere.vertices)))[:, None]
+    return Mesh(vertices, np.asarray(sphere.faces))
+
+
+def test_neighbour_angles_match_trimesh():
+    mesh = noisy_sphere()
+    ours = np.sort(neighbour_angles(mesh))
+    theirs = np.sort(np.degrees(trimesh.Trimesh(mesh.vertices, mesh.faces).face_adjacency_angles))
+    assert np.allclose(ours, theirs, atol=1e-6)
+
+
+def test_taubin_smooths_without_shrinking_and_keeps_fixed_vertices():
+    mesh = noisy_sphere()
+    smoothed = taubin(mesh, 3)
+    assert neighbour_angles(smoothed).mean() < 0.6 * neighbour_angles(mesh).mean()
+    radius = np.linalg.norm(smoothed.vertices, axis=1)
+    assert abs(radius.mean() - 1.0) < 0.01  # no shrinking (plain Laplacian steps would)
+    fixed = mesh.vertices[:, 2] < 0
+    kept = taubin(mesh, 3, fixed=fixed)
+    assert np.array_equal(kept.vertices[fixed], mesh.vertices[fixed])
+    assert taubin(mesh, 0) is mesh

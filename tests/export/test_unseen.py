@@ -1,0 +1,103 @@
+"""The side no photo saw (export/unseen.py): closed by the hull of what was seen, shards gone,
+concavities a photo looked into kept open, coloured a neutral grey."""
+
+import numpy as np
+import pytest
+
+from windowshop.export.mesh import components, marching_cubes, open_edges
+from windowshop.export.unseen import (NEAR, RAMP, close_unseen, hull_occupancy,
+                                      neutral_colour, surface_visibility, unseen_weight,
+                                      weight_at)
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+
+N = 64
+AABB = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+LEVEL = 5.0
+
+
+def lattice() -> np.ndarray:
+    axes = [np.linspace(-1, 1, N)] * 3
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+
+
+def front_cameras() -> list[Camera]:
+    """Three cameras looking at the origin from +x, 30 degrees either side of it."""
+    out = []
+    for azimuth in np.radians([-30.0, 0.0, 30.0]):
+        eye = 3.0 * np.array([np.cos(azimuth), np.sin(azimuth), 0.2])
+        out.append(Camera(fx=120, fy=120, cx=60, cy=60, width=120, height=120,
+                          c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))))
+    return out
+
+
+def torn_ball() -> np.ndarray:
+    """Densities of a ball of radius 0.6 whose back (x < -0.1), never photographed, is torn: a
+    hole bitten out of it and shards standing off it."""
+    p = lattice()
+    r = np.linalg.norm(p, axis=-1)
+    solid = r < 0.6
+    solid &= ~((p[..., 0] < -0.3) & (np.abs(p[..., 1]) < 0.25) & (np.abs(p[..., 2]) < 0.25))
+    rng = np.random.default_rng(1)
+    for _ in range(12):  # shards behind the ball
+        c = np.array([rng.uniform(-0.95, -0.6), rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)])
+        solid |= np.all(np.abs(p - c) < np.array([0.15, 0.02, 0.04]), axis=-1)
+    return np.where(solid, 2 * LEVEL, 0.0).astype(np.float32)
+
+
+def test_the_unseen_back_is_closed_by_the_hull_and_the_front_kept():
+    volume = torn_ball()
+    visibility = surface_visibility(volume > LEVEL, AABB, front_cameras())
+    front = visibility.points[:, 0] > 0.3
+    back = visibility.points[:, 0] < -0.5
+    assert visibility.seen[front].mean() > 0.9 and visibility.seen[back].mean() < 0.05
+    weight = unseen_weight(visibility, volume.shape)
+    closed = close_unseen(volume, LEVEL, weight, hull_occupancy(visibility, volume.shape, AABB, weight))
+    before, after = marching_cubes(volume, LEVEL, AABB), marching_cubes(closed, LEVEL, AABB)
+    # one closed piece, nothing beyond the ball's radius (the shards went) ...
+    assert len(np.unique(components(after))) == 1
+    radius = np.linalg.norm(after.vertices, axis=1)
+    assert radius.max() < 0.6 + 0.1
+    assert np.linalg.norm(before.vertices, axis=1).max() > 0.8  # (the shards were there)
+    # ... no hole and no shard: behind the photographed rim, the flat back of the seen part's hull
+    assert open_edges(after) == 0
+    rim = visibility.points[visibility.seen][:, 0].min()
+    # (the field's own surface is kept up to NEAR + RAMP cells from a seen point)
+    assert after.vertices[:, 0].min() > rim - (NEAR + RAMP) * 2.0 / (N - 1)
+    # ... and the photographed front where it was
+    seen_front = after.vertices[after.vertices[:, 0] > 0.35]
+    assert np.abs(np.linalg.norm(seen_front, axis=1) - 0.6).max() < 2.0 / (N - 1) * 1.5
+
+
+def test_a_concavity_the_photos_looked_into_stays_open():
+    p = lattice()
+    solid = (np.linalg.norm(p, axis=-1) < 0.6) & ~((p[..., 0] > 0.2) & (np.abs(p[..., 1]) < 0.2)
+                                                   & (np.abs(p[..., 2]) < 0.2))  # a pit facing +x
+    volume = np.where(solid, 2 * LEVEL, 0.0).astype(np.float32)
+    visibility = surface_visibility(volume > LEVEL, AABB, front_cameras())
+    weight = unseen_weight(visibility, volume.shape)
+    closed = close_unseen(volume, LEVEL, weight, hull_occupancy(visibility, volume.shape, AABB, weight))
+    pit = (p[..., 0] > 0.35) & (p[..., 0] < 0.55) & (np.abs(p[..., 1]) < 0.1) & (np.abs(p[..., 2]) < 0.1)
+    assert (closed[pit] < LEVEL).all()
+
+
+def test_everything_seen_changes_nothing():
+    p = lattice()
+    volume = np.where(np.linalg.norm(p, axis=-1) < 0.6, 2 * LEVEL, 0.0).astype(np.float32)
+    cameras = []
+    for azimuth in np.radians(np.arange(0, 360, 30)):
+        for z in (-2.0, 0.3, 2.0):
+            eye = np.array([3 * np.cos(azimuth), 3 * np.sin(azimuth), z])
+            cameras.append(Camera(fx=120, fy=120, cx=60, cy=60, width=120, height=120,
+                                  c2w=look_at(eye, np.zeros(3), np.array([0.0, 0.0, 1.0]))))
+    visibility = surface_visibility(volume > LEVEL, AABB, cameras)
+    assert visibility.seen.mean() > 0.97
+    weight = unseen_weight(visibility, volume.shape)
+    assert weight_at(weight, AABB, np.array([[0.6, 0.0, 0.0], [0.0, 0.0, -0.6]])).max() == 0
+
+
+def test_the_unseen_colour_is_a_neutral_grey():
+    colours = np.array([[0.9, 0.1, 0.1], [0.8, 0.2, 0.1]])
+    grey = neutral_colour(colours, np.array([1.0, 1.0]))
+    assert np.ptp(grey) == 0 and 0.2 < grey[0] < 0.5
+    assert neutral_colour(colours, np.zeros(2)) == pytest.approx([0.6, 0.6, 0.6])

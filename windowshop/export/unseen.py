@@ -1,0 +1,212 @@
+"""The sides no photo saw, closed smoothly instead of as the field's guesses.
+
+Where no training photo looked (the back of a front-only capture), the field's density is
+whatever training left there: marching cubes turns it into torn shards. Before marching cubes,
+the lattice's surface points are tested against the training cameras as the texture's bake
+tests texels (photos.py): a point is seen by a camera when the surface there faces it, it
+projects into its photo, and it is the nearest surface in that pixel's neighbourhood (a depth
+buffer splatted from the surface points themselves). Away from every seen point (beyond NEAR
+cells, fully past NEAR + RAMP) the lattice's occupancy is replaced by the convex hull of the seen
+points, less the space any photo saw through (in front of the nearest surface in its pixel), its
+edges rounded by a Gaussian of SMOOTH cells: the back of a front-only capture is closed by the
+hull its photographed front spans, the field's shards and hollows there go, concavities a photo
+looked into stay open, and the seen surface is kept as it was.
+
+`seen_points` is also what texture.py asks to colour neutrally (see `neutral_colour`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from scipy import ndimage
+
+from windowshop.export.photos import splat_depth
+from windowshop.export.raster import screen
+from windowshop.scene.types import Camera
+
+MIN_COS = 0.15  # as photos.MIN_COS: a surface seen more obliquely is not seen
+SIDE = 256  # pixels on a photo's longer side for the visibility test
+TOLERANCE = 4.0  # cells a seen point may lie behind the nearest surface in its pixel's 3x3
+EMPTY = 2.0  # cells in front of the nearest surface in its pixel from which space counts as seen empty
+STRIDE = 2  # the visibility is tested on every STRIDE-th lattice vertex along each axis
+NEAR = 3.0  # cells from a seen surface point within which the field's own surface is kept
+RAMP = 4.0  # cells over which the blurred occupancy takes over beyond NEAR
+SMOOTH = 2.0  # cells: the Gaussian's sigma that rounds the hull's edges
+HULL_POINTS = 5_000  # seen points the convex hull is taken of, at most (a random subset)
+HULL_STRIDE = 4  # the hull's occupancy is tested on every HULL_STRIDE-th lattice vertex at most,
+HULL_CELLS = 64  # keeping at least this many along the lattice's longest side
+
+
+@dataclass
+class Visibility:
+    """Which of the lattice's surface points some training photo saw."""
+
+    points: np.ndarray  # (S, 3) the lattice's surface points (normalised frame)
+    index: np.ndarray  # (S, 3) their indices on the lattice thinned by `stride`
+    seen: np.ndarray  # (S,) bool
+    stride: int = 1
+    cell: float = 0.0  # the thinned lattice's cell (world units)
+    # each camera, made small, and the nearest surface point's depth in each of its pixels
+    # (splat_depth's): what tells space a camera saw through from space it did not
+    views: list[tuple[Camera, torch.Tensor]] = field(default_factory=list)
+
+    @property
+    def unseen_share(self) -> float:
+        return float(1.0 - self.seen.mean()) if len(self.seen) else 0.0
+
+
+def lattice_points(index: np.ndarray, aabb: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """(N, 3) the positions of lattice vertices `index` (N, 3) over `aabb` (2, 3)."""
+    spacing = (aabb[1] - aabb[0]) / (np.asarray(shape) - 1)
+    return aabb[0] + index * spacing
+
+
+def surface_visibility(occupied: np.ndarray, aabb: np.ndarray, cameras: list[Camera],
+                       side: int = SIDE, stride: int = STRIDE) -> Visibility:
+    """Which surface points of the `occupied` (X, Y, Z) lattice over `aabb` (every `stride`-th
+    vertex along each axis) the `cameras` see."""
+    thin = occupied[::stride, ::stride, ::stride]
+    index = np.argwhere(thin & ~ndimage.binary_erosion(thin))
+    points = lattice_points(index * stride, aabb, occupied.shape)
+    blur = ndimage.gaussian_filter(thin.astype(np.float32), 1.0)
+    grad = np.stack([ndimage.sobel(blur, axis=k)[tuple(index.T)] for k in range(3)], -1)
+    normals = -grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
+    cell = stride * float((aabb[1] - aabb[0]).max()) / max(max(occupied.shape) - 1, 1)
+    p = torch.as_tensor(points, dtype=torch.float32)
+    n = torch.as_tensor(normals, dtype=torch.float32)
+    seen = torch.zeros(len(p), dtype=torch.bool)
+    centre_of_box = (aabb[0] + aabb[1]) / 2
+    views = []
+    for camera in cameras:
+        # small enough that neighbouring surface points fall at most a pixel apart (the depth
+        # buffer's 3x3 neighbourhood then has no holes to see through), at most `side` pixels
+        distance = float(np.linalg.norm(camera.c2w[:3, 3] - centre_of_box))
+        scale = min(side / max(camera.width, camera.height), distance / (cell * camera.fx))
+        small = camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+        xy, z = screen(p, small)
+        depth = splat_depth(xy, z, small)
+        views.append((small, depth))
+        centre = torch.as_tensor(small.c2w[:3, 3], dtype=torch.float32)
+        cos = (n * F.normalize(centre - p, dim=-1)).sum(-1)
+        px = torch.floor(xy).long()
+        inside = ((px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] < small.width)
+                  & (px[:, 1] < small.height) & (z > 0) & (cos > MIN_COS))
+        k = inside.nonzero()[:, 0]
+        c = cos[k]
+        slack = TOLERANCE * cell + 2 * z[k] / small.fx * torch.sqrt(1 - c * c) / c
+        seen[k[z[k] <= depth[px[k, 1], px[k, 0]] + slack]] = True
+    return Visibility(points=points, index=index, seen=seen.numpy(), stride=stride, cell=cell,
+                      views=views)
+
+
+def seen_empty(visibility: Visibility, points: torch.Tensor) -> torch.Tensor:
+    """(N,) bool: whether some camera saw through each of `points` (N, 3): it lies in the
+    camera's photo more than EMPTY cells in front of the nearest surface in its pixel."""
+    empty = torch.zeros(len(points), dtype=torch.bool)
+    for small, depth in visibility.views:
+        xy, z = screen(points, small)
+        px = torch.floor(xy).long()
+        ok = ((px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] < small.width)
+              & (px[:, 1] < small.height) & (z > 0)).nonzero()[:, 0]
+        empty[ok[z[ok] < depth[px[ok, 1], px[ok, 0]] - EMPTY * visibility.cell]] = True
+    return empty
+
+
+def unseen_weight(visibility: Visibility, shape: tuple[int, int, int]) -> np.ndarray:
+    """(X, Y, Z) float32 in [0, 1]: 0 within NEAR cells of a seen surface point, rising to 1
+    (unseen) over RAMP cells; all 0 when every point (or none) was seen."""
+    weight = np.zeros(shape, dtype=np.float32)
+    if visibility.seen.all() or not visibility.seen.any():
+        return weight
+    k = visibility.stride
+    far = np.ones(tuple(-(-n // k) for n in shape), dtype=bool)  # the thinned lattice's shape
+    far[tuple(visibility.index[visibility.seen].T)] = False
+    distance = k * ndimage.distance_transform_edt(far).astype(np.float32)  # in full-size cells
+    weight = torch.as_tensor(np.clip((distance - NEAR) / RAMP, 0.0, 1.0))
+    size = tuple(n * k for n in far.shape)
+    weight = F.interpolate(weight[None, None], size=size, mode="nearest")[0, 0]
+    return weight[:shape[0], :shape[1], :shape[2]].numpy()
+
+
+def hull_occupancy(visibility: Visibility, shape: tuple[int, int, int], aabb: np.ndarray,
+                   weight: np.ndarray, chunk: int = 1 << 18) -> np.ndarray:
+    """(X, Y, Z) float32 in [0, 1], 0.5 on the surface: inside the convex hull of the seen surface
+    points and not where a camera saw through (seen_empty), over the lattice of `shape` over
+    `aabb`. The hull's signed distance (the largest of its planes') and the seen-through space
+    are found on every k-th vertex (k <= HULL_STRIDE) where the unseen `weight` (X, Y, Z) is not
+    0 (nowhere else is the result used) and brought to full size trilinearly: a distance that is
+    linear between the vertices stays exact, so the hull's faces come out flat, and its edges
+    round over SMOOTH cells."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    seen = visibility.points[visibility.seen]
+    if len(seen) > HULL_POINTS:
+        seen = seen[np.random.default_rng(0).choice(len(seen), HULL_POINTS, replace=False)]
+    k = int(np.clip(max(shape) // HULL_CELLS, 1, HULL_STRIDE))
+    try:
+        planes = torch.as_tensor(ConvexHull(seen).equations, dtype=torch.float32)  # (P, 4)
+    except (QhullError, ValueError):
+        return np.zeros(shape, dtype=np.float32)
+    cell = float((aabb[1] - aabb[0]).max()) / max(max(shape) - 1, 1)
+    # every coarse vertex next to a wanted one too, so interpolation reads computed values only
+    wanted = ndimage.binary_dilation(weight[::k, ::k, ::k] > 0, np.ones((3, 3, 3), bool))
+    index = np.argwhere(wanted)
+    distance = np.full(wanted.shape, 10.0 * SMOOTH * cell, dtype=np.float32)  # outside
+    empty = np.zeros(wanted.shape, dtype=np.float32)
+    for first in range(0, len(index), chunk):
+        at = index[first:first + chunk]
+        p = torch.as_tensor(lattice_points(at * k, aabb, shape), dtype=torch.float32)
+        d = (p @ planes[:, :3].T + planes[:, 3]).amax(1)  # < 0 inside
+        distance[tuple(at.T)] = d.numpy()
+        inside = d < 0
+        through = torch.zeros_like(inside)
+        through[inside] = seen_empty(visibility, p[inside])  # never fill what a photo saw through
+        empty[tuple(at[through.numpy()].T)] = 1.0
+
+    def full_size(coarse: np.ndarray) -> np.ndarray:
+        # coarse vertex i is full vertex i * k (align_corners), the last few padded by the edge
+        size = tuple((n - 1) * k + 1 for n in coarse.shape)
+        out = F.interpolate(torch.as_tensor(coarse)[None, None], size=size, mode="trilinear",
+                            align_corners=True)[0, 0].numpy()
+        out = np.pad(out, [(0, max(0, n - m)) for n, m in zip(shape, size)], mode="edge")
+        return out[:shape[0], :shape[1], :shape[2]]
+
+    solid = np.clip(0.5 - full_size(distance) / (2 * SMOOTH * cell), 0.0, 1.0)
+    return (solid * (1.0 - full_size(ndimage.gaussian_filter(empty, SMOOTH / k)))).astype(np.float32)
+
+
+def close_unseen(volume: np.ndarray, level: float, weight: np.ndarray,
+                 target: np.ndarray) -> np.ndarray:
+    """(X, Y, Z) densities: `volume`'s where the unseen `weight` (X, Y, Z) is 0, the occupancy
+    `target` (X, Y, Z) in [0, 1] (hull_occupancy; 0.5 is the surface) where it is 1, blended
+    between, at the same `level`."""
+    if not weight.any():
+        return volume
+    # both as "occupancy", 0.5 at the level: the field's density through d / (d + level)
+    field = np.maximum(volume, 0.0) / (np.maximum(volume, 0.0) + level)
+    blended = (1.0 - weight) * field + weight * target
+    out = level * blended / np.maximum(1.0 - blended, 1e-6)
+    return np.where(weight > 0, out, volume).astype(volume.dtype)
+
+
+def weight_at(weight: np.ndarray, aabb: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) the unseen `weight` (X, Y, Z) over `aabb` at the lattice vertex nearest each of
+    `points` (N, 3)."""
+    shape = np.asarray(weight.shape)
+    index = np.round((points - aabb[0]) / (aabb[1] - aabb[0]) * (shape - 1)).astype(np.int64)
+    index = np.clip(index, 0, shape - 1)
+    return weight[tuple(index.T)]
+
+
+def neutral_colour(colours: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(3,) the colour for surface no photo saw: grey at the mean brightness of the `colours`
+    (N, 3) the photos gave (weighted by `weights` (N,)), so it neither shouts nor pretends."""
+    if weights.sum() <= 0:
+        return np.full(3, 0.6, dtype=np.float32)
+    mean = (colours * weights[:, None]).sum(0) / weights.sum()
+    grey = float(mean @ np.array([0.299, 0.587, 0.114]))
+    return np.full(3, grey, dtype=np.float32)

@@ -100,6 +100,14 @@ def shelf_pack(sizes: np.ndarray, width: float) -> tuple[np.ndarray, float]:
     return corners, y + shelf
 
 
+def chart_padding(charts: int, size: int) -> float:
+    """The texels between charts: PADDING, or none when so many charts (a rough surface of
+    thousands of small ones) could not fit a `size` texture with it, however small they are
+    drawn (4,365 charts in 256 x 256: the shrinking never ended)."""
+    room = np.full((charts, 2), 2.0 * PADDING + 1.0)  # its padding and a texel of each chart
+    return PADDING if shelf_pack(room, size)[1] <= size else 0.0
+
+
 def unwrap(mesh: Mesh, size: int) -> Unwrapped:
     """`mesh` with texture coordinates of a `size` x `size` texture (see the module docstring)."""
     label = chart_labels(mesh)
@@ -120,13 +128,14 @@ def unwrap(mesh: Mesh, size: int) -> Unwrapped:
     np.maximum.at(hi, pairs[:, 1], flat)
     extent = hi - lo
     scale = np.sqrt(FILL * size * size / np.sum((extent + 1e-12).prod(1)))  # texels per unit
+    padding = chart_padding(n_charts, size)
     while True:
-        sizes = extent * scale + 2 * PADDING
+        sizes = extent * scale + 2 * padding
         corners, used = shelf_pack(sizes, size)
         if used <= size:
             break
         scale *= 0.95
-    texel = (flat - lo[pairs[:, 1]]) * scale + corners[pairs[:, 1]] + PADDING
+    texel = (flat - lo[pairs[:, 1]]) * scale + corners[pairs[:, 1]] + padding
     out = Mesh(vertices=mesh.vertices[pairs[:, 0]], faces=inverse.reshape(-1, 3))
     return Unwrapped(vertices=out.vertices, faces=out.faces,
                      normals=vertex_normals(mesh)[pairs[:, 0]], uv=texel / size, source=pairs[:, 0])

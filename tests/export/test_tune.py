@@ -10,7 +10,8 @@ import trimesh
 from windowshop.export.mesh import Mesh
 from windowshop.export.photos import Photos
 from windowshop.export.raster import render_mesh, visible_faces
-from windowshop.export.tune import manifold_edges, outline_coverage, silhouette_edges, tune_surface
+from windowshop.export.tune import (Adam, manifold_edges, outline_coverage, silhouette_edges,
+                                    tune_surface)
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
@@ -112,3 +113,18 @@ def test_without_masks_flat_colour_gives_no_reason_to_move(zbuffer):
     mesh = grey_sphere(0.85)
     # the photos' grey is the texture's wherever the mesh is drawn: no colour pulls it outwards
     assert np.abs(tuned(mesh, photos).vertices - mesh.vertices).max() < CELL * 0.05
+
+
+def test_the_hand_adam_steps_as_torchs_adam():
+    """The tune's Adam (no torch.optim: its import costs a second) moves a parameter exactly as
+    torch.optim.Adam does, bias corrections included, over steps of varied gradients."""
+    torch.manual_seed(0)
+    ours, theirs = torch.zeros(50, requires_grad=True), torch.zeros(50, requires_grad=True)
+    adam, reference = Adam(ours, 0.05), torch.optim.Adam([theirs], lr=0.05)
+    for step in range(30):
+        grad = torch.randn(50) * (10.0 ** (step % 4 - 2))
+        adam.step(grad.clone())
+        theirs.grad = grad.clone()
+        reference.step()
+        assert torch.equal(ours.detach(), theirs.detach()), step
+    assert ours.abs().max() > 0.5  # it did move

@@ -84,6 +84,7 @@ from windowshop.errors import UserError
 from windowshop.photos.align import umeyama
 from windowshop.photos.ingest import IMAGE_SUFFIXES
 from windowshop.photos.prepare import prepare
+from windowshop.photos.sensors import CAPTURE_FILE, FORMAT
 from windowshop.scene.cameras import up_vector
 
 RIGHT_DEG = 5.0  # a delivered scene is right when the median relative rotation error is at most
@@ -319,8 +320,8 @@ def sensor_capture(case: Case, folder: Path, seed: int = 0) -> int:
         entries.append({"file": photo.name, "order": order,
                         "up": _turned(seen, abs(rng.normal(0, GRAVITY_NOISE_DEG)), rng).tolist(),
                         "heading_deg": float(heading % 360.0)})
-    (folder / "capture.json").write_text(json.dumps(
-        {"format": "windowshop-capture", "version": 1, "sensors": "simulated", "photos": entries}))
+    (folder / CAPTURE_FILE).write_text(json.dumps(
+        {"format": FORMAT, "version": 1, "sensors": "simulated", "photos": entries}))
     return len(entries)
 
 

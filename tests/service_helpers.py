@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -33,6 +34,37 @@ def wait_js(page, expression: str, timeout: float = 30.0, poll: float = 0.1) -> 
     while not page.evaluate(expression):
         assert time.monotonic() < deadline, f"never true: {expression}"
         time.sleep(poll)
+
+
+def canvas_shares(canvas_id: str, **tests: str) -> str:
+    """A page expression: for each name in `tests`, the share of the canvas `canvas_id`'s pixels
+    for which its JavaScript condition on the pixel's `r`, `g`, `b` holds (read through a 2D copy,
+    so a WebGL canvas counts too)."""
+    counts = "".join(f"if ({condition}) n.{name}++;\n    " for name, condition in tests.items())
+    return f"""(() => {{
+  const source = document.getElementById('{canvas_id}');
+  const copy = document.createElement('canvas');
+  [copy.width, copy.height] = [source.width, source.height];
+  const context = copy.getContext('2d');
+  context.drawImage(source, 0, 0);
+  const p = context.getImageData(0, 0, copy.width, copy.height).data;
+  const n = {{{", ".join(f"{name}: 0" for name in tests)}}};
+  for (let i = 0; i < p.length; i += 4) {{
+    const [r, g, b] = [p[i], p[i + 1], p[i + 2]];
+    {counts}}}
+  for (const k in n) n[k] /= p.length / 4;
+  return n;
+}})()"""
+
+
+@contextmanager
+def live_service(data: Path, env: dict[str, str] | None = None):
+    """A LiveService on `data`, stopped on leaving."""
+    live = LiveService(data, env).start()
+    try:
+        yield live
+    finally:
+        live.stop()
 
 
 # Service settings that make a job take seconds: few training steps, few small frames, a small model.

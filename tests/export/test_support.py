@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from windowshop.export.mesh import marching_cubes, open_edges
-from windowshop.export.support import GROW, cut_support, flatten_base, plane_found
+from windowshop.export.support import (GROW, cut_support, flatten_base, plane_found,
+                                       prepared_report)
 
 N = 96
 AABB = np.array([[-1.0, -1.0, 0.0], [1.0, 1.0, 2.0]])  # the floor at z = 0: the plane
@@ -50,11 +51,12 @@ def test_a_wide_base_of_the_object_itself_is_kept():
 
 
 def test_plane_found_reads_the_prepared_report(tmp_path):
-    assert not plane_found(tmp_path)
+    assert not plane_found(prepared_report(tmp_path))
     (tmp_path / "report.json").write_text(json.dumps({"plane": {"found": True}}))
-    assert plane_found(tmp_path) and plane_found(tmp_path / "transforms.json")
+    assert plane_found(prepared_report(tmp_path))
+    assert plane_found(prepared_report(tmp_path / "transforms.json"))
     (tmp_path / "report.json").write_text(json.dumps({"plane": {"found": False}}))
-    assert not plane_found(tmp_path)
+    assert not plane_found(prepared_report(tmp_path))
 
 
 def test_the_floor_is_the_lowest_layer_the_object_occupies():

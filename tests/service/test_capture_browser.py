@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageFilter
 
-from service_helpers import CHROMIUM, CHROMIUM_ARGS, LiveService, needs_chromium, wait_js
+from service_helpers import CHROMIUM, CHROMIUM_ARGS, live_service, needs_chromium, wait_js
 from shared_data import DATA
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
@@ -125,9 +125,8 @@ def camera(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
-    live = LiveService(tmp_path_factory.mktemp("capture") / "data").start()
-    yield live
-    live.stop()
+    with live_service(tmp_path_factory.mktemp("capture") / "data") as live:
+        yield live
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from service_helpers import (CHROMIUM, CHROMIUM_ARGS, LiveService, needs_chromium, posed_scene_zip,
-                             wait_js)
+from service_helpers import (CHROMIUM, CHROMIUM_ARGS, canvas_shares, live_service, needs_chromium,
+                             posed_scene_zip, wait_js)
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
@@ -24,9 +24,8 @@ pytestmark = needs_chromium
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
-    live = LiveService(tmp_path_factory.mktemp("e2e") / "data").start()
-    yield live
-    live.stop()
+    with live_service(tmp_path_factory.mktemp("e2e") / "data") as live:
+        yield live
 
 
 @pytest.fixture(scope="module")
@@ -41,19 +40,7 @@ def browser():
 
 
 # the share of the 3D view's pixels that are not its white background
-MODEL_PIXELS = """(() => {
-  const source = document.getElementById('model-view');
-  const copy = document.createElement('canvas');
-  [copy.width, copy.height] = [source.width, source.height];
-  const context = copy.getContext('2d');
-  context.drawImage(source, 0, 0);
-  const pixels = context.getImageData(0, 0, copy.width, copy.height).data;
-  let drawn = 0;
-  for (let i = 0; i < pixels.length; i += 4) {
-    if (pixels[i] < 240 || pixels[i + 1] < 240 || pixels[i + 2] < 240) drawn++;
-  }
-  return drawn / (pixels.length / 4);
-})()"""
+MODEL_PIXELS = canvas_shares("model-view", drawn="r < 240 || g < 240 || b < 240")
 
 
 def wait_until_done(page, timeout_ms: int = 240_000) -> None:
@@ -123,7 +110,7 @@ def test_upload_watch_play_and_spin(service, browser, tmp_path):
     assert page.get_attribute("#model-view", "data-state") == "ready", \
         page.get_attribute("#model-view", "data-error")
     assert not page.is_visible("#ar")  # AR Quick Look is offered on iOS only
-    drawn = page.evaluate(MODEL_PIXELS)
+    drawn = page.evaluate(MODEL_PIXELS)["drawn"]
     assert drawn > 0.02, "the 3D view is blank"
     view = page.locator("#model-view")
     view.scroll_into_view_if_needed()

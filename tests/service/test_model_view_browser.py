@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service_helpers import CHROMIUM, CHROMIUM_ARGS, needs_chromium
+from service_helpers import CHROMIUM, CHROMIUM_ARGS, canvas_shares, needs_chromium
 from windowshop.export.asset import Asset
 from windowshop.export.frame import ModelFrame
 from windowshop.export.glb import write_glb
@@ -34,20 +34,8 @@ PAGE = """<!doctype html><html><head><meta charset="utf-8"></head><body style="m
 <script>window.showModel(document.getElementById('model-view'), 'cube.glb');</script>
 </body></html>"""
 # share of the view's pixels that are red (the photographed side) and blue (the other one)
-COLOURS = """(() => {
-  const source = document.getElementById('model-view');
-  const copy = document.createElement('canvas');
-  [copy.width, copy.height] = [source.width, source.height];
-  const context = copy.getContext('2d');
-  context.drawImage(source, 0, 0);
-  const p = context.getImageData(0, 0, copy.width, copy.height).data;
-  let red = 0, blue = 0;
-  for (let i = 0; i < p.length; i += 4) {
-    if (p[i] > 2 * p[i + 2] + 40 && p[i] > 2 * p[i + 1] + 40) red++;
-    if (p[i + 2] > 2 * p[i] + 40 && p[i + 2] > 2 * p[i + 1] + 40) blue++;
-  }
-  return {red: red / (p.length / 4), blue: blue / (p.length / 4)};
-})()"""
+COLOURS = canvas_shares("model-view", red="r > 2 * b + 40 && r > 2 * g + 40",
+                        blue="b > 2 * r + 40 && b > 2 * g + 40")
 
 pytestmark = needs_chromium
 

@@ -101,9 +101,10 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     if masked is not None and masked.cameras and np.isfinite(level):
         volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
         lap("carve")
-    prepared = prepared_report(run.scene_source) is not None
+    prepared = prepared_report(run.scene_source)
     grid, unseen, unseen_share, cut = closed_lattice(volume.cpu().numpy(), level, aabb,
-                                                     run.train_cameras, options, prepared, lap)
+                                                     run.train_cameras, options,
+                                                     prepared is not None, lap)
     volume = torch.as_tensor(grid, device=volume.device)
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
@@ -159,7 +160,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             "triangles": int(len(faces)), "texture": 0 if texture is None else texture.shape[0],
             "photos": 0 if photos is None else len(photos.cameras),
             "unseen_share": round(unseen_share, 4), "support_cut": cut is not None,
-            "support_plane": plane_found(run.scene_source),
+            "support_plane": plane_found(prepared),
             "neighbour_angle": {**angles, "delivered": round(float(neighbour_angles(mesh).mean()), 2)},
             "orbit": orbit, "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,

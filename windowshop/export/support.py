@@ -43,10 +43,9 @@ def prepared_report(scene_source: str | Path) -> dict | None:
     return data if isinstance(data, dict) else None
 
 
-def plane_found(scene_source: str | Path) -> bool:
-    """Whether the scene at `scene_source` was prepared with a support plane (report.json)."""
-    report = prepared_report(scene_source) or {}
-    plane = report.get("plane")
+def plane_found(report: dict | None) -> bool:
+    """Whether prepare's `report` (prepared_report) says it found a support plane."""
+    plane = (report or {}).get("plane")
     return bool(plane.get("found")) if isinstance(plane, dict) else False
 
 

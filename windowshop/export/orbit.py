@@ -13,6 +13,8 @@ all round; else it is limited to the arc plus MARGIN degrees either side.
 
 from __future__ import annotations
 
+from html import escape
+
 import numpy as np
 
 from windowshop.scene.types import Camera
@@ -46,6 +48,16 @@ def covered_orbit(cameras: list[Camera], centre: np.ndarray, margin: float = MAR
         attributes.update({"min-camera-orbit": f"{orbit['min']:.1f}deg auto auto",
                            "max-camera-orbit": f"{orbit['max']:.1f}deg auto auto"})
     orbit["model_viewer"] = attributes
-    orbit["embed"] = ("<model-viewer src=\"model.glb\" camera-controls "
-                      + " ".join(f'{k}="{v}"' for k, v in attributes.items()) + "></model-viewer>")
+    orbit["embed"] = embed_snippet(attributes, "model.glb")
     return orbit
+
+
+def embed_snippet(attributes: dict, src: str, ios_src: str | None = None) -> str:
+    """A <model-viewer> element showing the GLB at `src` (and, in AR on iOS, the USDZ at
+    `ios_src`) with the orbit's `attributes` (`model_viewer`). The service's page writes the same
+    element with the job's addresses (static/app.js; its browser test holds the two equal)."""
+    def quoted(values: dict) -> list[str]:
+        return [f'{k}="{escape(str(v))}"' for k, v in values.items() if v is not None]
+
+    parts = [*quoted({"src": src, "ios-src": ios_src}), "camera-controls", *quoted(attributes)]
+    return f"<model-viewer {' '.join(parts)}></model-viewer>"

@@ -319,18 +319,23 @@ def get_coverage(request: Request, job_id: str) -> FileResponse:
     return FileResponse(_result(request, job_id, "video_coverage.png"), media_type="image/png")
 
 
+# the page's embed snippet puts these addresses in a shop's own page, where model-viewer fetches
+# them from another origin: a model is as public as its link, so any origin may read it
+_EMBEDDABLE = {"Access-Control-Allow-Origin": "*"}
+
+
 @router.get("/jobs/{job_id}/model.glb", response_class=FileResponse, responses=_REFUSALS,
             summary="The object as a 3D model (binary glTF, +Y up, metres or the scene's units)")
 def get_model(request: Request, job_id: str) -> FileResponse:
     return FileResponse(_result(request, job_id, MODEL_FILES["model.glb"]),
-                        media_type="model/gltf-binary")
+                        media_type="model/gltf-binary", headers=_EMBEDDABLE)
 
 
 @router.get("/jobs/{job_id}/model.usdz", response_class=FileResponse, responses=_REFUSALS,
             summary="The object as USDZ, for AR Quick Look on iOS")
 def get_usdz(request: Request, job_id: str) -> FileResponse:
     return FileResponse(_result(request, job_id, MODEL_FILES["model.usdz"]),
-                        media_type="model/vnd.usdz+zip")
+                        media_type="model/vnd.usdz+zip", headers=_EMBEDDABLE)
 
 
 @router.get("/jobs/{job_id}/frames/{index}.jpg", response_class=FileResponse, responses=_REFUSALS,

@@ -250,7 +250,47 @@ function showModels(links) {
   ar.href = links.usdz;
   $("ar-image").src = links.poster;
   ar.hidden = !document.createElement("a").relList.supports("ar");  // Safari on iOS only
-  window.showModel($("model-view"), links.model);
+  $("embed").hidden = true;
+  window.showModel($("model-view"), links.model).then((orbit) => showEmbed(links, orbit));
+}
+
+// ---- the embed snippet: the model on the seller's own shop page, with Google's model-viewer ----
+
+// As text only: this page never loads it (its Content-Security-Policy allows no other origin).
+const MODEL_VIEWER_SCRIPT = '<script type="module" ' +
+  'src="https://ajax.googleapis.com/ajax/libs/model-viewer/3.5.0/model-viewer.min.js"></script>';
+
+// The same element as windowshop/export/orbit.py's embed_snippet (the browser test holds them
+// equal): the orbit's attributes are the GLB's own (`model_viewer`); only the addresses are put in
+// here, absolute, since the snippet goes on another site.
+function modelViewerElement(links, orbit) {
+  const escape = (text) => String(text).replace(/[&<>"']/g, (c) =>
+    ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#x27;" })[c]);
+  const quoted = (values) => Object.entries(values).filter(([, v]) => v != null)
+    .map(([k, v]) => `${k}="${escape(v)}"`);
+  const address = (path) => path && new URL(path, location.href).href;
+  const parts = [...quoted({ src: address(links.model), "ios-src": address(links.usdz) }),
+                 "camera-controls", ...quoted((orbit && orbit.model_viewer) || {})];
+  return `<model-viewer ${parts.join(" ")}></model-viewer>`;
+}
+
+function showEmbed(links, orbit) {
+  $("embed-code").value = `${MODEL_VIEWER_SCRIPT}\n${modelViewerElement(links, orbit)}`;
+  $("embed-status").textContent = "";
+  $("embed").hidden = false;
+}
+
+// Copies the snippet; where the clipboard is refused (no permission, plain HTTP) it stays
+// selected, for the seller to copy by hand.
+async function copyEmbed() {
+  const code = $("embed-code");
+  code.select();
+  try {
+    await navigator.clipboard.writeText(code.value);
+    $("embed-status").textContent = "Copied";
+  } catch {
+    $("embed-status").textContent = "Selected: press Ctrl+C (⌘C on a Mac) to copy";
+  }
 }
 
 // What the photos gave and what to reshoot: the capture's quality report.
@@ -382,6 +422,7 @@ function setUp() {
   $("clear").onclick = clearFiles;
   $("send").onclick = upload;
   $("share").onclick = share;
+  $("embed-copy").onclick = copyEmbed;
   window.onpopstate = route;
   route();
 }

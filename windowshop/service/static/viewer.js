@@ -2,8 +2,9 @@
 // showModel(canvas, url) fetches a binary glTF (one mesh, as `windowshop export` writes it),
 // draws it lit from the viewer's side, and lets the user orbit it (drag), zoom (wheel, pinch)
 // and turn it with the arrow keys. canvas.dataset.state becomes "ready" once it is drawn, or
-// "failed" (with canvas.dataset.error) when the file or the browser cannot show it. Only
-// showModel is global.
+// "failed" (with canvas.dataset.error) when the file or the browser cannot show it; it resolves
+// to the GLB's orbit (below; null when it has none or could not be read), which the page's embed
+// snippet also needs, drawn or not. Only showModel is global.
 // The GLB's scene extras may hold windowshop.orbit (windowshop/export/orbit.py): the side to open
 // on (`start`, degrees of yaw: the camera at (sin, ., cos) about +Y from the model's centre) and,
 // when the photos did not go all round (`limited`), the yaw range `min`..`max` (the covered arc
@@ -274,10 +275,12 @@ function controls(canvas, camera, redraw) {
 
 async function showModel(canvas, url) {
   canvas.dataset.state = "loading";
+  let orbit = null;
   try {
     const response = await fetch(url);
     if (!response.ok) throw new Error(`the model could not be fetched (${response.status})`);
     const glb = parseGlb(await response.arrayBuffer());
+    orbit = orbitOf(glb);
     const image = await baseColourImage(glb, glb.json.meshes[0].primitives[0]);
     const options = { preserveDrawingBuffer: true, antialias: true };
     const gl = canvas.getContext("webgl2", options) || canvas.getContext("webgl", options);
@@ -285,7 +288,6 @@ async function showModel(canvas, url) {
     const p = program(gl);
     gl.useProgram(p);
     const mesh = upload(gl, p, glb, image);
-    const orbit = orbitOf(glb);
     const limit = yawLimit(orbit);
     const camera = { yaw: limit(orbit ? orbit.start * RADIANS : 0.6), pitch: 0.35,
                      distance: 2.6 * mesh.radius, limit };
@@ -326,6 +328,7 @@ async function showModel(canvas, url) {
     canvas.dataset.state = "failed";
     canvas.dataset.error = String(err.message || err);
   }
+  return orbit;
 }
 
 window.showModel = showModel;

@@ -12,7 +12,8 @@ the ring; kermit: evenly spaced file names), k > 0 starts the sampling at the ph
 k / offsets of the subset's spacing further round (temple: k = 1 the odd-indexed photos, k = 2
 the azimuth sampling; kermit: the file names shifted by k). beer_can gives prepare all its
 photos but scores, and draws subsets from, only the frames whose published pose is trustworthy
-(bench_fewphoto.beer_can). `--extra NAME=PATH` adds a capture from a folder with images/ and a
+(bench_fewphoto.beer_can); its subsets, whose photos mostly lie past the published model's first
+fold, are scored against beer_can/full as this run delivered it, when that is right (run first). `--extra NAME=PATH` adds a capture from a folder with images/ and a
 ground-truth transforms.json (nerfstudio, OpenGL camera-to-world; a frame's file_path stem is its
 photo's stem).
 
@@ -102,6 +103,7 @@ class Capture:
     subset: object = None  # (count, offset) -> list[Path], when the capture has its own rule
     up: np.ndarray | None = None  # the true up (3,) in the truth's world frame, when known
     scored: object = None  # (photo) -> bool: whose published pose scores a delivered one
+    own_reference: bool = False  # subsets scored against this bench's full-set model (below)
 
 
 # beer_can's published model is folded: in azimuth about the can, its frames 0014-0034 and
@@ -110,6 +112,8 @@ class Capture:
 # and 0046-0047, a wall corner behind 0020, a door behind 0026), so only the first run, before
 # the published model's first jump, scores a delivered pose (bench/RESULTS.md, "Right or refused")
 BEER_RELIABLE = 13  # frames 0000-0013
+# ... so its subsets, whose photos mostly lie past frame 0013, are scored against this run's own
+# model of all its photos instead, when that model is right on the trustworthy frames
 
 
 @dataclass
@@ -119,6 +123,7 @@ class Case:
     photos: list[Path]
     truth: dict[str, np.ndarray] = field(default_factory=dict)  # photo stem -> c2w
     up: np.ndarray | None = None  # the true up (3,) in the truth's world frame
+    reference: str | None = None  # the full case whose delivered poses, when right, score it
 
 
 def _all(reader) -> dict[Path, np.ndarray | None]:
@@ -191,7 +196,7 @@ def shared_capture(name: str) -> Capture:
     if name == "beer_can":  # all photos to prepare; subsets from the trustworthy frames
         truth = _all(beer_can)
         return Capture(name, _images(DATA / "beer_can" / "images"), truth, up=level_up(truth),
-                       scored=lambda p: int(p.stem) <= BEER_RELIABLE)
+                       scored=lambda p: int(p.stem) <= BEER_RELIABLE, own_reference=True)
     if name == "kermit":
         truth = kermit(len(sorted((DATA / "kermit").glob("*.jpg"))))
         return Capture(name, sorted(truth), truth, _kermit_subset)
@@ -233,7 +238,9 @@ def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int)
     def case(name: str, photos: list[Path]) -> Case:
         truth = {p.stem: c for p, c in capture.truth.items() if c is not None and p in photos
                  and (capture.scored is None or capture.scored(p))}
-        return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth, capture.up)
+        reference = f"{capture.name}/full" if capture.own_reference and name != "full" else None
+        return Case(f"{capture.name}/{name}", capture.name, sorted(photos), truth, capture.up,
+                    reference)
 
     out = []
     seen = set()
@@ -325,9 +332,13 @@ def sensor_capture(case: Case, folder: Path, seed: int = 0) -> int:
     return len(entries)
 
 
-def run_case(case: Case, options: PrepareOptions, sensors: bool = False) -> dict:
-    """prepare on the case's photos (links in a folder of their own), classified and scored;
-    with `sensors`, the phone's capture.json beside them (sensor_capture)."""
+def run_case(case: Case, options: PrepareOptions, sensors: bool = False,
+             references: dict[str, dict[str, np.ndarray]] | None = None
+             ) -> tuple[dict, dict[str, np.ndarray]]:
+    """(row, delivered c2ws by photo stem): prepare on the case's photos (links in a folder of
+    their own), classified and scored (against `references`[case.reference] when the case has
+    one and it was delivered right); with `sensors`, the phone's capture.json beside them
+    (sensor_capture)."""
     row: dict = {"case": case.name, "given": len(case.photos)}
     if not case.name.endswith("/full"):
         row["photos"] = [p.name for p in case.photos]
@@ -348,7 +359,7 @@ def run_case(case: Case, options: PrepareOptions, sensors: bool = False) -> dict
                        traceback=traceback.format_exc(limit=-4))
         row["seconds"] = round(time.perf_counter() - start, 1)
         if "outcome" in row:
-            return row
+            return row, {}
         report = json.loads((out / "report.json").read_text())
         meta = json.loads((out / "transforms.json").read_text())
     stem = {v["name"]: Path(v["photo"]).stem for v in report["views"]}
@@ -360,15 +371,19 @@ def run_case(case: Case, options: PrepareOptions, sensors: bool = False) -> dict
                ring=sorted(report.get("estimated_from_ring", {})),
                dropped=report.get("dropped", {}), attempts=report.get("attempts"),
                stage_seconds=report.get("seconds"))
-    if len(set(delivered) & set(case.truth)) >= 3:
-        score(row, delivered, case.truth, case.up)
+    truth = case.truth
+    if case.reference in (references or {}):
+        truth = {n: c for n, c in references[case.reference].items() if n in given}
+        row["scored_against"] = f"{case.reference} as delivered (right on its published poses)"
+    if len(set(delivered) & set(truth)) >= 3:
+        score(row, delivered, truth, None if case.reference in (references or {}) else case.up)
     else:  # no published poses, or too few of the delivered photos have trustworthy ones
         row["outcome"] = "delivered-unscored"
     if "verification" in report:
         row["verification"] = report["verification"]
     if "priors" in report:
         row["priors"] = report["priors"]
-    return row
+    return row, delivered
 
 
 def _value(text: str):
@@ -462,13 +477,19 @@ def main() -> None:
         captures.append(extra_capture(name, Path(path)))
     todo = [c for capture in captures
             for c in cases(capture, args.full, args.subsets, args.count, args.offsets)]
-    todo = sorted((c for c in todo if args.only is None or args.only in c.name),
-                  key=lambda c: c.name.endswith("/full"))  # the quick subsets first
+    referenced = {c.reference for c in todo if args.only is None or args.only in c.name}
+    # the quick subsets first, after any full case that scores them
+    todo = sorted((c for c in todo if args.only is None or args.only in c.name
+                   or c.name in referenced),
+                  key=lambda c: 0 if c.name in referenced else 1 + c.name.endswith("/full"))
     results = {**machine(), "worktree": worktree(), "options": dataclasses.asdict(options),
                "right_deg": RIGHT_DEG, "right_share": RIGHT_SHARE, "sensors": args.sensors,
                "cases": {}}
+    references: dict[str, dict[str, np.ndarray]] = {}
     for case in todo:
-        row = run_case(case, options, args.sensors)
+        row, delivered = run_case(case, options, args.sensors, references)
+        if case.name in referenced and row["outcome"] == "right":
+            references[case.name] = delivered
         results["cases"][case.name] = row
         print(json.dumps(row), flush=True)
         if args.out:  # kept as it grows, for a run that is stopped

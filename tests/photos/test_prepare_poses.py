@@ -1,5 +1,6 @@
 """Recovered poses against published ones, after a similarity alignment (windowshop.photos.align):
-20 beer_can photos against its COLMAP model, and the Middlebury temple with known intrinsics."""
+beer_can's first 14 photos against its COLMAP model, and the Middlebury temple with known
+intrinsics."""
 
 from __future__ import annotations
 
@@ -31,19 +32,17 @@ def _reference(path: Path) -> dict[str, np.ndarray]:
     return {f.image_path.stem: f.camera.c2w for f in read_source(path).frames}
 
 
-def beer_sample(count: int = 20) -> list[Path]:
-    """`count` beer_can photos spread evenly over the frames whose reference pose is trustworthy.
+def beer_sample() -> list[Path]:
+    """The beer_can photos whose published pose is trustworthy: frames 0000-0013.
 
-    beer_can's own COLMAP model is not right everywhere: the can and the tiled floor look alike
-    from opposite sides, and after frames 13, 34 and 52 the model jumps the camera 11-16 times
-    its usual step between consecutive video frames (a run of frames placed on the mirror side).
-    Frames 12-19, 33-40 and 51-58 are left out, and so are the two frames whose own focal length
-    is off the model's median by more than 2% (0030 and 0044: their centres move along the axis).
+    beer_can's own COLMAP model is folded after them: the can is printed with its logo twice,
+    and its frames 0014-0034 and 0053-0070 lie 160-180 degrees from where the walk puts them
+    (0000 with a railing behind and 0027 with a door behind it 1.4 degrees apart; this
+    repository's model of all 70 frames puts them 177 degrees apart). A sample over the whole
+    walk is folded the same way by structure from motion and refused by the background check
+    (tests/photos/test_verify_background.py).
     """
-    doubtful = {i for jump in (13, 34, 52) for i in range(jump - 1, jump + 7)} | {30, 44}
-    frames = [i for i in range(71) if i not in doubtful]
-    picks = np.linspace(0, len(frames) - 1, count).round().astype(int)
-    return [DATA / "beer_can" / "images" / f"{frames[i]:04d}.jpg" for i in picks]
+    return [DATA / "beer_can" / "images" / f"{i:04d}.jpg" for i in range(14)]
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +54,8 @@ def beer(tmp_path_factory):
     return prepare(photos, photos.parent / "scene", PrepareOptions(max_side=640), show=False)
 
 
-def test_beer_can_20_photos_agree_with_its_colmap_model(beer):
-    assert beer.report["placed"] >= 18
+def test_beer_can_photos_of_its_first_side_agree_with_its_colmap_model(beer):
+    assert beer.report["placed"] >= 13
     errors = pose_errors(_recovered(beer.out_dir), _reference(DATA / "beer_can" / "sparse" / "0"))
     assert len(errors.names) == beer.report["placed"]
     by_name = dict(zip(errors.names, zip(errors.rotation_deg, errors.centre_share)))

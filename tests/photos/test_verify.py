@@ -98,6 +98,39 @@ def test_photos_at_random_rolls_know_no_up():
     assert agreed_level(c2ws) is None
 
 
+def test_photos_turned_by_quarters_give_their_up_and_the_cameras_stand_above_it():
+    # a walk of 12 photos at rolls 0/90/180/270 (EXIF lost), each held level within 2 degrees:
+    # the right axes agree on nothing, each photo's right-or-up axis does
+    up = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    rolls = np.resize([0.0, 90.0, 180.0, 270.0], 12) + np.random.default_rng(1).normal(0, 2, 12)
+    c2ws = np.stack([c.c2w for c in _ring(12, up, rolls)])
+    assert np.degrees(np.arccos(abs(_level_of_rights(c2ws) @ up))) > 20  # right axes alone: lost
+    found = agreed_level(c2ws)
+    assert found is not None and upright.angle(found, up) < 3.0
+    assert photos_level(c2ws)[1] < LEVEL_SPREAD_DEG
+
+
+def test_photos_looking_level_at_quarter_rolls_are_not_read_as_lying_down():
+    # cameras at the object's height: any horizontal direction would turn every photo a quarter
+    # (each up axis vertical); only the true up leaves their level axes spread round a plane
+    up = np.array([0.0, 0.0, 1.0])
+    cams = []
+    for k, roll in enumerate(np.resize([0.0, 90.0], 10)):
+        a = 2 * np.pi * k / 10
+        c2w = look_at(3.0 * np.array([np.cos(a), np.sin(a), 0.0]) + [0, 0, 0.3],
+                      np.array([0, 0, 0.3]), up)
+        c2w[:3, :3] = c2w[:3, :3] @ Rotation.from_euler("z", roll, degrees=True).as_matrix()
+        cams.append(c2w)
+    found = agreed_level(np.stack(cams))
+    assert found is not None and upright.angle(found, up) < 1.0
+
+
+def _level_of_rights(c2ws: np.ndarray) -> np.ndarray:
+    """The direction most perpendicular to the right axes alone (the upright photos' rule)."""
+    rights = c2ws[:, :3, 0]
+    return np.linalg.eigh(rights.T @ rights)[1][:, 0]
+
+
 def _box_masks(cameras: list[Camera], lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
     """Each camera's exact silhouette of the box [lo, hi] (by dense samples of its volume)."""
     axis = np.linspace(0, 1, 40)
@@ -128,6 +161,35 @@ def test_silhouettes_of_right_poses_cohere_and_a_moved_camera_does_not():
     wrong = silhouettes.coherence(masks, moved, aabb)
     assert wrong[3] < silhouettes.SUSPECT_IOU < scores[3]
     assert np.delete(wrong, 3).min() > 0.7  # the others keep their agreement
+
+
+def test_a_photo_placed_far_from_where_its_outline_says_is_blamed_for_its_scale():
+    from windowshop.photos.located import Located
+    from windowshop.photos.output import PosedPhoto
+    from windowshop.photos.verify import scale
+
+    lo, hi = np.array([-0.5, -0.3, -0.6]), np.array([0.5, 0.3, 0.6])
+    cameras = _ring(10, np.array([0, 0, 1.0]))
+    masks = _box_masks(cameras, lo, hi)
+
+    def hypothesis(cams: list[Camera]) -> Hypothesis:
+        photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", c, {}) for k, c in enumerate(cams)]
+        found = Located(photos=photos, transform=np.eye(4), aabb=np.stack([lo, hi]),
+                        points=np.zeros((0, 3)), masks={}, mask_kind="segmented",
+                        background="", plane=None,
+                        raw_masks={f"p{k}": m for k, m in enumerate(masks)})
+        return Hypothesis("as mapped", sfm=None, found=found)
+
+    right = scale.check(hypothesis(cameras))
+    assert right.passed and right.suspects == ()
+    assert max(scale.ratios(hypothesis(cameras)).values()) < 2 * min(
+        scale.ratios(hypothesis(cameras)).values())  # a box seen round a ring: within 2x
+    moved = list(cameras)  # photo 4 placed 6 times as far along its own axis: its box looks small
+    c2w = cameras[4].c2w.copy()
+    c2w[:3, 3] *= 6.0
+    moved[4] = Camera(**{**vars(cameras[4]), "c2w": c2w})
+    wrong = scale.check(hypothesis(moved))
+    assert not wrong.passed and wrong.suspects == ("p4.jpg",), wrong
 
 
 def test_photos_stacked_on_one_viewpoint_fold_but_a_second_turn_does_not():
@@ -167,3 +229,17 @@ def test_a_refusal_reports_the_failure_of_the_latest_of_equally_ranked_hypothese
     better = [tried[0], hypotheses.Tried(Hypothesis("pruned", sfm=None), Verdict(
         [Check("pairs", 1, 0, "agree"), Check("object", 0, 1, "x")]))]
     assert hypotheses.fallback(better) is better[1]  # as many failed, more checks made
+
+
+def test_photos_all_turned_a_quarter_give_the_rings_up_and_one_spot_gives_none():
+    # temple's photos are all turned 90 degrees: every right axis lies along up, so any
+    # direction across it is "level" for them; their up axes, level, say which
+    up = np.array([0.0, 0.0, 1.0])
+    c2ws = np.stack([c.c2w for c in _ring(16, up, np.full(16, 90.0))])
+    found = agreed_level(c2ws)
+    assert found is not None and upright.angle(found, up) < 1.0
+    # photos from one spot, whatever their rolls, agree on no up (their view would fit any roll)
+    one_spot = np.stack([c2ws[0]] * 4)
+    for k, roll in enumerate((0.0, 90.0, 3.0, 92.0)):
+        one_spot[k, :3, :3] = c2ws[0, :3, :3] @ Rotation.from_euler("z", roll, degrees=True).as_matrix()
+    assert agreed_level(one_spot) is None

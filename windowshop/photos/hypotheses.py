@@ -8,11 +8,12 @@ cheapest first, each verified in turn, until one passes or the time limit
     where they look   no object stood out among the sparse points: the object is where the
                       photos look, found by its masks (the visual hull of GrabCut's outlines)
     photos' up        the upright check failed: up from the photos' level instead of the plane
-    pruned            the pairs check failed: the contradicting pairs dropped from the
-                      matches (pair pruning, as Cui & Tan 2015), mapped again
+    pruned            the pairs or background check failed: the contradicting pairs dropped
+                      from the matches (pair pruning, as Cui & Tan 2015), mapped again
     global            the same matches through pycolmap's global mapper (rotation averaging,
                       held to the phone's gravity when capture.json gives it)
-    without suspects  the photos the checks blame left out, to be reshot
+    without suspects  the photos the checks blame left out, to be reshot (then photos' up
+                      again, for what is left)
 
 The first that passes is kept; when none does, the best-ranked one is kept only under
 `--force` (and marked unverified), otherwise prepare fails with what was wrong and what to
@@ -32,7 +33,7 @@ import pycolmap
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.photos import sfm as sfm_
-from windowshop.photos.verify import Check, Hypothesis, Verdict, verify
+from windowshop.photos.verify import Check, Hypothesis, Verdict, background, verify
 from windowshop.photos.verify.pairs import disagreements, strong_pairs
 
 
@@ -152,23 +153,29 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
 
 
 def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
-    """A copy of the best hypothesis's database without the pairs that contradict its model."""
+    """A copy of the best hypothesis's database without the pairs that contradict its model:
+    strong pairs whose rotation it denies, and, when it places pairs that match only on the
+    object side by side (verify.background: a fold of an object printed alike), every pair
+    that matches only on the object."""
     model = best.sfm.reconstruction
-    conflicts = [p for p, d in disagreements(model, strong_pairs(model, best.sfm.database))
-                 if p.conflicts(d)]
+    conflicts = [(p.first, p.second) for p, d in
+                 disagreements(model, strong_pairs(model, best.sfm.database)) if p.conflicts(d)]
+    seam = background.side_by_side(best) if best.found is not None else None
+    if seam is not None and len(seam[0]) >= background.MIN_CONFLICTS:
+        conflicts += background.object_only(best)
     if not conflicts:
         return None
     copy = search.work / f"database_pruned_{len(list(search.work.glob('database_pruned_*')))}.db"
     shutil.copyfile(search.evidence, copy)
     with pycolmap.Database.open(copy) as db:
         ids = {im.name: im.image_id for im in db.read_all_images()}
-        for pair in conflicts:
-            db.delete_two_view_geometry(ids[pair.first], ids[pair.second])
+        for first, second in set(conflicts):
+            db.delete_two_view_geometry(ids[first], ids[second])
     return copy
 
 
 def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    if not any(c.name == "pairs" for c in verdict.failed):
+    if not any(c.name in ("pairs", "background") for c in verdict.failed):
         return None
     database = _pruned_database(search, best)
     result = None if database is None else _remapped(search, best, "pruned", database, "incremental")
@@ -176,7 +183,7 @@ def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | N
 
 
 def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    if not any(c.name == "pairs" for c in verdict.failed):
+    if not any(c.name in ("pairs", "background") for c in verdict.failed):
         return None  # a photo whose gravity alone disagrees is left out (without_suspects)
     database = _pruned_database(search, best)
     if database is None:  # a copy all the same: the phone's gravity is written into it
@@ -206,7 +213,9 @@ def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypo
                       by_points=best.by_points)
 
 
-STRATEGIES = (looked_at, photos_up, pruned, global_mapper, without_suspects)
+# photos' up again last: leaving photos out can leave the rest agreeing on a level the plane
+# denies (temple's 8-photo ring without its 3 misplaced photos: the plane 44 degrees off)
+STRATEGIES = (looked_at, photos_up, pruned, global_mapper, without_suspects, photos_up)
 
 
 def choose(search: Search, first: sfm_.SfmResult) -> Choice:

@@ -232,7 +232,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     """Support plane, up, object box, normalisation and masks for a reconstruction; `pixels` by
     image file name. `up`: "plane" (the support plane's normal, else the cameras'), "gravity"
     (the phone's: `gravity` holds each photo's up in its camera frame by image file name,
-    windowshop.photos.sensors) or "photos" (the direction their level right axes agree on; the
+    windowshop.photos.sensors) or "photos" (the direction their level axes agree on; the
     plane then bounds nothing). Not `by_points`: the object is where the cameras look, found
     by its masks alone (plane.isolate). UserError when no object stands out, or the photos agree
     on no up when asked for it."""

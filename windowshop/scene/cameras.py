@@ -106,7 +106,15 @@ def _mean_up(c2ws: np.ndarray) -> np.ndarray:
     # signed so that the cameras stand above what they look at, as round an object on a table
     # (photos at mixed rolls, their EXIF lost, have no majority up: 0/90/180/270-degree beer_can
     # frames came out 130 degrees off by the ups' signs)
-    return normal if (centres.mean(0) - nearest_point_to_axes(c2ws)) @ normal >= 0 else -normal
+    return normal * _above_sign(c2ws, normal)
+
+
+def _above_sign(c2ws: np.ndarray, up: np.ndarray) -> float:
+    """+1 when the cameras stand above the point they look at along `up` (3,), else -1: by
+    the median camera, as one placed far off (thousands of units, in 12 rolled beer_can frames)
+    would outweigh the rest in a mean."""
+    heights = (c2ws[:, :3, 3] - nearest_point_to_axes(c2ws)) @ up
+    return 1.0 if np.median(heights) >= 0 else -1.0
 
 
 def _level_up(c2ws: np.ndarray) -> np.ndarray:
@@ -120,30 +128,118 @@ def _level_up(c2ws: np.ndarray) -> np.ndarray:
     return up / np.linalg.norm(up)
 
 
-LEVEL_SPREAD_DEG = 6.0  # photos whose right axes lie within this (RMS) of one level agree on up
+LEVEL_SPREAD_DEG = 6.0  # photos whose level axes lie within this (RMS) of one level agree on up
+TURNED = 0.02  # the level axes' second eigenvalue above this: they spread over a plane
+QUARTER_SEEDS = 600  # directions tried as up for photos at quarter-turn rolls (about 6 deg apart)
+QUARTER_REFINES = 6
+MAX_STEEP_DEG = 70.0  # an up the cameras look along more steeply than this (median) is no up
+QUARTER_KEEP = 0.9  # the share of photos whose level axes decide a quarter-turn up
 
 
 def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
-    """(unit up (3,) most perpendicular to the cameras' right axes, signed like their mean up;
-    the RMS angle in degrees between the right axes and the horizontal it defines), for
-    camera-to-world matrices (N, 4, 4) with OpenGL axes."""
+    """(unit up (3,), the RMS angle in degrees between each photo's level axis and the horizontal
+    that up defines), for camera-to-world matrices (N, 4, 4) with OpenGL axes.
+
+    A photo is taken with the camera level: its right axis is horizontal, or, for a photo turned
+    a quarter (a portrait held sideways whose EXIF orientation was lost), its up axis. Up is the
+    direction most perpendicular to the right axes, signed like the cameras' mean up, when they
+    agree on one; else (photos at mixed quarter rolls) the direction most perpendicular to each
+    photo's right or up axis, whichever is nearer level, signed so that the cameras stand above
+    what they look at."""
     rights = c2ws[:, :3, 0]
-    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
-    up = eigvecs[:, 0]
-    if up @ c2ws[:, :3, 1].sum(0) < 0:
-        up = -up
-    spread = float(np.degrees(np.arcsin(np.sqrt(max(eigvals[0], 0.0)))))
-    return up, spread
+    up, spread, turned = _level_of(rights)
+    # right axes that do not turn (all along one line: photos from one spot, or every photo
+    # turned a quarter, temple's) leave any direction across that line "level": not an answer
+    if (spread <= LEVEL_SPREAD_DEG and turned > TURNED) or len(c2ws) < 3:
+        return (up if up @ c2ws[:, :3, 1].sum(0) >= 0 else -up), spread
+    up, spread = _quarter_level(c2ws)
+    return up * _above_sign(c2ws, up), spread
+
+
+def _level_of(axes: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(the unit direction most perpendicular to `axes` (N, 3), their RMS angle in degrees from
+    the plane it defines, their second eigenvalue: how far they spread over that plane)."""
+    eigvals, eigvecs = np.linalg.eigh(axes.T @ axes / len(axes))  # ascending
+    spread = float(np.degrees(np.arcsin(np.sqrt(np.clip(eigvals[0], 0.0, 1.0)))))
+    return eigvecs[:, 0], spread, float(eigvals[1])
+
+
+def _level_axes(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(N, 3) each camera's right or up axis, whichever is nearer perpendicular to `up`."""
+    rights, ups = c2ws[:, :3, 0], c2ws[:, :3, 1]
+    return np.where((np.abs(rights @ up) <= np.abs(ups @ up))[:, None], rights, ups)
+
+
+def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
+    """(unit up (3,), sign open; spread in degrees) for photos at quarter-turn rolls: each seed
+    over the sphere picks every photo's level axis, the best seeds are refined by picking and
+    solving again, and of the ups the level axes agree on, the one the cameras keep the
+    steadiest elevation about wins: walking round an object keeps its height, and a wrong up
+    (a horizontal one can turn every photo a quarter and fit as well) sweeps the cameras'
+    elevation up and down as they go round. Only the QUARTER_KEEP share of photos nearest level
+    decides the fit (a photo placed 40 degrees off tilted 12 rolled beer_can frames' up)."""
+    seeds = _sphere(QUARTER_SEEDS)
+    rights, ups, views = c2ws[:, :3, 0], c2ws[:, :3, 1], -c2ws[:, :3, 2]
+    nearer = np.abs(rights @ seeds.T) <= np.abs(ups @ seeds.T)  # (N, S)
+    off = np.where(nearer, np.abs(rights @ seeds.T), np.abs(ups @ seeds.T))  # sines off level
+    kept = max(3, int(np.ceil(QUARTER_KEEP * len(c2ws))))
+    flatness = np.mean(np.sort(off, axis=0)[:kept] ** 2, axis=0)
+    axes = np.where(nearer[..., None], rights[:, None], ups[:, None])  # (N, S, 3)
+    turned = np.linalg.eigvalsh(np.einsum("nsi,nsj->sij", axes, axes) / len(c2ws))[:, 1]
+    elevations = np.degrees(np.arcsin(np.clip(views @ seeds.T, -1.0, 1.0)))  # (N, S)
+    steadiness, steepness = elevations.std(axis=0), np.median(np.abs(elevations), axis=0)
+    order = sorted(range(len(seeds)),
+                   key=lambda k: _rank(flatness[k], turned[k], steadiness[k], steepness[k]))
+    refined = []
+    for seed in seeds[order[:8]]:
+        up = seed
+        for _ in range(QUARTER_REFINES):
+            up, spread, spreads = _trimmed_level(_level_axes(c2ws, up), kept)
+        elevation = np.degrees(np.arcsin(np.clip(views @ up, -1.0, 1.0)))
+        refined.append((_rank(np.sin(np.radians(spread)) ** 2, spreads, elevation.std(),
+                              np.median(np.abs(elevation))), up, spread))
+    _, up, spread = min(refined, key=lambda r: r[0])
+    return up, float(spread)
+
+
+def _trimmed_level(axes: np.ndarray, kept: int) -> tuple[np.ndarray, float, float]:
+    """_level_of the `kept` of `axes` (N, 3) nearest the plane it finds (solved twice)."""
+    up = _level_of(axes)[0]
+    for _ in range(2):
+        up, spread, turned = _level_of(axes[np.argsort(np.abs(axes @ up))[:kept]])
+    return up, spread, turned
+
+
+def _rank(flatness: float, turned: float, steadiness: float, steepness: float
+          ) -> tuple[int, float]:
+    """Sort key of an up whose level axes have eigenvalues `flatness` (off its plane) and
+    `turned` (spread round it), the cameras' elevations about it varying by `steadiness`
+    degrees, their median size `steepness` degrees: agreed ups first, the steadiest; then the
+    flattest. An up along the cameras' own view (every camera looking straight down it) is
+    level for photos at any roll, and no answer."""
+    if turned <= TURNED or steepness > MAX_STEEP_DEG:
+        return (2, flatness)
+    agreed = flatness <= np.sin(np.radians(LEVEL_SPREAD_DEG)) ** 2
+    return (0, steadiness) if agreed else (1, flatness)
+
+
+def _sphere(count: int) -> np.ndarray:
+    """(count, 3) unit directions spread evenly over the upper half sphere (a Fibonacci lattice):
+    up's sign is settled apart."""
+    k = np.arange(count) + 0.5
+    z = 1.0 - k / count
+    angle = np.pi * (3.0 - np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z ** 2)
+    return np.stack([r * np.cos(angle), r * np.sin(angle), z], axis=1)
 
 
 def agreed_level(c2ws: np.ndarray) -> np.ndarray | None:
-    """The photos' up (3,) when their right axes agree on one (spread under LEVEL_SPREAD_DEG)
+    """The photos' up (3,) when their level axes agree on one (spread under LEVEL_SPREAD_DEG)
     and they turn round it (not all at one azimuth, where any up fits), else None."""
     if len(c2ws) < 3:
         return None
     up, spread = photos_level(c2ws)
-    rights = c2ws[:, :3, 0]
-    turned = np.linalg.eigvalsh(rights.T @ rights / len(rights))[1] > 0.02
+    turned = _level_of(_level_axes(c2ws, up))[2] > TURNED
     return up if spread <= LEVEL_SPREAD_DEG and turned else None
 
 

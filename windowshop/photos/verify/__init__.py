@@ -15,13 +15,18 @@ no masks to compare) in a module of its own:
                  its pose, against the other photos'
     viewpoints   distinct photos, far apart in shooting order, stacked on one viewpoint (a few
                  photos of an object whose sides look alike, folded)
+    background   pairs placed side by side whose matches all lie on the object, none on a
+                 background that other pairs do match (a fold of an object printed alike)
+    scale        each photo's distance from the object against the object's size in its
+                 outline: a photo placed far off would see it small
 
 `verify` runs them all; windowshop.photos.hypotheses decides what to try next.
 """
 
 from __future__ import annotations
 
-from windowshop.photos.verify import gravity, pairs, silhouettes, upright, viewpoints
+from windowshop.photos.verify import (background, gravity, pairs, scale, silhouettes, upright,
+                                      viewpoints)
 from windowshop.photos.verify.types import Check, Hypothesis, Verdict
 
 __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
@@ -30,5 +35,6 @@ __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
 def verify(hypothesis: Hypothesis) -> Verdict:
     """Every check that applies to `hypothesis`."""
     checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check,
-                                               gravity.check, viewpoints.check))
+                                               gravity.check, viewpoints.check, scale.check,
+                                               background.check))
     return Verdict([c for c in checks if c is not None])

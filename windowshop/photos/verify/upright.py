@@ -3,8 +3,9 @@ themselves show.
 
 Phone photos are taken level, turned upright by their EXIF orientation: each camera's right axis
 is then horizontal, so gravity is the direction most perpendicular to all of them, whatever each
-photo's pitch. When the right axes agree on one such direction (their rolls spread by a few
-degrees) the photos know where up is; a support plane far from it is a slope, a wall or a
+photo's pitch (a photo turned a quarter, its EXIF lost, has its up axis horizontal instead: see
+scene.cameras.photos_level). When those axes agree on one such direction (their rolls spread by
+a few degrees) the photos know where up is; a support plane far from it is a slope, a wall or a
 pedestal's side, and the object would lean in every frame. Photos at random rolls know nothing,
 and the check does not apply.
 """

@@ -46,3 +46,28 @@ def test_haze_the_masks_see_as_background_is_emptied_and_the_ball_kept():
     assert torch.equal(carved[ball], volume[ball])
     assert bool((carved[haze] < 0).all())
     assert torch.equal(carved[~ball & ~haze], volume[~ball & ~haze])  # below the level: untouched
+
+
+def test_the_boxes_vote_as_the_vertices_one_by_one():
+    # an uneven lump with haze about it, cameras near enough that the lattice spills out of
+    # some photos, masks of a smaller ball: every way a box can be decided or not
+    from windowshop.export.carve import TOLERANCE, background_lattice, background_votes
+
+    n = 45
+    axis = torch.linspace(-1, 1, n)
+    x, y, z = torch.meshgrid(axis, axis, axis, indexing="ij")
+    generator = torch.Generator().manual_seed(0)
+    haze = torch.rand(n, n, n, generator=generator) < 0.1
+    occupied = ((x**2 + 0.6 * y**2 + z**2).sqrt() < 0.8) | haze
+    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    cameras = ring_cameras(6, 48)
+    for camera in cameras[::2]:
+        camera.c2w[:3, 3] *= 0.55  # close up: parts of the lattice outside the photo
+    masks = [ball_mask(c) for c in cameras]
+    points = aabb[0] + occupied.nonzero().float() * (aabb[1] - aabb[0]) / (n - 1)
+    seen, background = background_votes(points, cameras, masks)
+    expected = torch.zeros_like(occupied)
+    expected[occupied] = background > torch.clamp(TOLERANCE * seen, min=1.0)
+    assert 0 < int(expected.sum()) < int(occupied.sum())
+    for blocks in [(16, 4), (8,), (4, 2), ()]:
+        assert torch.equal(background_lattice(occupied, aabb, cameras, masks, blocks), expected)

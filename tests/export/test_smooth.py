@@ -30,3 +30,12 @@ def test_taubin_smooths_without_shrinking_and_keeps_fixed_vertices():
     kept = taubin(mesh, 3, fixed=fixed)
     assert np.array_equal(kept.vertices[fixed], mesh.vertices[fixed])
     assert taubin(mesh, 0) is mesh
+
+
+def test_compact_drops_unused_vertices_and_keeps_their_order():
+    from windowshop.export.mesh import Mesh, compact
+
+    vertices = np.arange(18, dtype=np.float64).reshape(6, 3)
+    mesh = compact(Mesh(vertices, np.array([[5, 1, 3], [3, 1, 4]])))
+    assert np.array_equal(mesh.vertices, vertices[[1, 3, 4, 5]])
+    assert np.array_equal(mesh.faces, [[3, 0, 1], [1, 0, 2]])

@@ -10,8 +10,8 @@ import trimesh
 from windowshop.export.mesh import Mesh
 from windowshop.export.photos import Photos
 from windowshop.export.raster import render_mesh, visible_faces
-from windowshop.export.tune import (Adam, manifold_edges, outline_coverage, silhouette_edges,
-                                    tune_surface)
+from windowshop.export.tune import (Adam, manifold_edges, outline_coverage, outline_edges,
+                                    silhouette_edges, tune_surface)
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
@@ -128,3 +128,28 @@ def test_the_hand_adam_steps_as_torchs_adam():
         reference.step()
         assert torch.equal(ours.detach(), theirs.detach()), step
     assert ours.abs().max() > 0.5  # it did move
+
+
+def test_the_edges_near_the_outline_give_the_whole_silhouette_s_coverage(zbuffer):
+    # a lumpy sphere: silhouette edges inside the outline too (folds), of which outline_edges
+    # keeps only those whose box meets a covered pixel beside an uncovered one
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    rng = np.random.default_rng(0)
+    lumps = 1 + 0.04 * rng.standard_normal((len(sphere.vertices), 1))
+    vertices = torch.as_tensor(sphere.vertices * lumps, dtype=torch.float32)
+    faces = torch.as_tensor(sphere.faces)
+    edges, sides = (torch.as_tensor(x) for x in manifold_edges(np.asarray(sphere.faces)))
+    camera = ring_photos(sphere, 40).cameras[1]
+    from windowshop.export.raster import screen
+
+    xy, depth = screen(vertices, camera)
+    covered = (visible_faces(xy, depth, faces, camera.width, camera.height) >= 0).view(
+        camera.height, camera.width)
+    eye = torch.as_tensor(camera.c2w[:3, 3]).float()
+    every = silhouette_edges(vertices, faces, edges, sides, eye)
+    near = outline_edges(xy, vertices, faces, edges, sides, eye, covered)
+    assert len(near) < len(every)
+    assert set(map(tuple, near.tolist())) <= set(map(tuple, every.tolist()))
+    pixels, coverage = outline_coverage(xy, every, covered)
+    pixels_near, coverage_near = outline_coverage(xy, near, covered)
+    assert torch.equal(pixels, pixels_near) and torch.equal(coverage, coverage_near)

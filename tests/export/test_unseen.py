@@ -101,3 +101,26 @@ def test_the_unseen_colour_is_a_neutral_grey():
     grey = neutral_colour(colours, np.array([1.0, 1.0]))
     assert np.ptp(grey) == 0 and 0.2 < grey[0] < 0.5
     assert neutral_colour(colours, np.zeros(2)) == pytest.approx([0.6, 0.6, 0.6])
+
+
+def test_the_hull_does_not_reach_out_to_a_floater_the_model_drops():
+    # the ball photographed from the front, and a small blob of haze standing above it in full
+    # view: mesh.keep_largest drops it (a piece under keep_share of the ball's area), so the
+    # seen surface's hull must not stretch up to it
+    p = lattice()
+    blob = np.linalg.norm(p - np.array([0.3, 0.0, 0.85]), axis=-1) < 0.08
+    solid = (np.linalg.norm(p, axis=-1) < 0.6) | blob
+    volume = np.where(solid, 2 * LEVEL, 0.0).astype(np.float32)
+    between = np.linalg.norm(p - np.array([0.2, 0.0, 0.72]), axis=-1) < 0.03  # ball to blob
+    on_blob = np.linalg.norm(p[::2, ::2, ::2] - np.array([0.3, 0.0, 0.85]), axis=-1) < 0.1
+    hulls = {}
+    for share in (0.0, 0.05):
+        visibility = surface_visibility(volume > LEVEL, AABB, front_cameras(), keep_share=share)
+        blob_points = on_blob[tuple(visibility.index.T)]
+        assert visibility.seen[blob_points].any()  # the photos see it, as they see the ball
+        assert visibility.kept[blob_points].all() == (share == 0.0)
+        assert visibility.kept[~blob_points].all()
+        weight = unseen_weight(visibility, volume.shape)
+        hulls[share] = hull_occupancy(visibility, volume.shape, AABB, weight)
+    assert (hulls[0.0][between] > 0.5).all()  # (the floater's points stretch the hull)
+    assert (hulls[0.05][between] < 0.5).all()

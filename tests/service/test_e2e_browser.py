@@ -14,8 +14,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from service_helpers import (CHROMIUM, CHROMIUM_ARGS, canvas_shares, live_service, needs_chromium,
-                             posed_scene_zip, wait_js)
+from service_helpers import canvas_shares, live_service, needs_chromium, posed_scene_zip, wait_js
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
@@ -26,16 +25,6 @@ pytestmark = needs_chromium
 def service(tmp_path_factory):
     with live_service(tmp_path_factory.mktemp("e2e") / "data") as live:
         yield live
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
 
 
 

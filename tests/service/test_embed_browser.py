@@ -19,7 +19,7 @@ import time
 import numpy as np
 import pytest
 
-from service_helpers import CHROMIUM, CHROMIUM_ARGS, free_port, needs_chromium
+from service_helpers import free_port, needs_chromium
 from windowshop.export.asset import Asset
 from windowshop.export.frame import ModelFrame
 from windowshop.export.glb import read_extras, write_glb
@@ -91,16 +91,6 @@ def service(tmp_path_factory):
     yield f"http://127.0.0.1:{server.config.port}", app, jobs
     server.should_exit = True
     thread.join(10)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
 
 
 def open_snippet(browser, url: str, job_id: str, before: str | None = None):

@@ -186,7 +186,8 @@ def closed_lattice(grid: np.ndarray, level: float, aabb: np.ndarray, cameras: li
     unseen, share, cut = None, 0.0, None
     if options.close_unseen:
         views = [cameras[i] for i in spread(options.bake_views or 24, len(cameras))]
-        visibility = surface_visibility(grid > level, aabb, views)
+        # the hull is of the seen parts the model keeps (keep_share, as mesh.keep_largest)
+        visibility = surface_visibility(grid > level, aabb, views, keep_share=options.keep_share)
         unseen, share = unseen_weight(visibility, grid.shape), visibility.unseen_share
         grid = close_unseen(grid, level, unseen, hull_occupancy(visibility, grid.shape, aabb, unseen))
         lap("unseen")

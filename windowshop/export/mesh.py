@@ -84,7 +84,10 @@ def components(mesh: Mesh) -> np.ndarray:
 def face_areas(mesh: Mesh) -> np.ndarray:
     """(F,) the area of every face."""
     a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=-1)
+    u, v = (b - a).T, (c - a).T  # the cross product by its components: np.cross's, faster
+    cross = np.stack([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                      u[0] * v[1] - u[1] * v[0]], -1)
+    return 0.5 * np.linalg.norm(cross, axis=-1)
 
 
 def keep_largest(mesh: Mesh, share: float) -> Mesh:
@@ -96,9 +99,11 @@ def keep_largest(mesh: Mesh, share: float) -> Mesh:
 
 
 def compact(mesh: Mesh) -> Mesh:
-    """The mesh without the vertices no face uses."""
-    used, faces = np.unique(mesh.faces, return_inverse=True)
-    return Mesh(vertices=mesh.vertices[used], faces=faces.reshape(-1, 3))
+    """The mesh without the vertices no face uses (their order kept)."""
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[mesh.faces] = True
+    index = np.cumsum(used) - 1  # a used vertex's new index (a sort's np.unique, in one pass)
+    return Mesh(vertices=mesh.vertices[used], faces=index[mesh.faces])
 
 
 def decimate(mesh: Mesh, triangles: int) -> Mesh:

@@ -2,10 +2,11 @@
 
     python bench/bench_models.py [--rows dtu_skull beer_can kermit fruit] [--photos 20]
                                  [--work /work/exp37] [--reuse] [--pictures docs/models]
+                                 [--export KEY=VALUE ...]
 
 Per capture: `windowshop video` at the defaults on the photos bench_real.py picks (its run folder
 kept under --work/<capture>; --reuse re-exports that run with the current export instead of
-running the video again), then the delivered GLB, read back with trimesh and put in the scene's
+running the video again, with ExportOptions overridden by --export, e.g. close_unseen=false), then the delivered GLB, read back with trimesh and put in the scene's
 frame through its side file, drawn with windowshop.export.raster at the run's held-out photos:
 - psnr_glb / psnr_field: PSNR inside the prepared mask (alpha > 0.5) over white (pixels the
   GLB misses count as white), and the field's own there;
@@ -18,7 +19,12 @@ frame through its side file, drawn with windowshop.export.raster at the run's he
 - unseen_share: the share of the delivered surface's area that no training photo saw (a face is
   seen when its centre faces a training camera, projects into its photo and is the nearest
   surface there), and unseen_angle / seen_angle: the mean angle (degrees) between neighbouring
-  faces there and on the seen part (how torn the unseen side is);
+  faces there and on the seen part; unseen_torn / seen_torn: the share of the edge length
+  between faces meeting at over TORN degrees there; unseen_shards / seen_shards: the share of
+  the area lying in shards, the pieces the surface falls into when cut at those edges that hold
+  under SHARD_SHARE of its area (a crease, where a hull's flat face meets the photographed
+  surface or the base meets the sides, bounds large pieces; a torn surface falls into small
+  ones: how torn the unseen side is, crease or not);
 - psnr_lit: the same PSNR with the GLB drawn lit as a viewer's default light does (half from the
   camera, half ambient) with glTF's metal-free GGX specular at each of ROUGHNESS, its exposure
   fitted: whether the material adds a highlight the baked texture already holds;
@@ -61,6 +67,7 @@ MARGIN = 0.03  # of the box's diagonal: how far outside the covered hull a face 
 SEEN_SIDE = 320  # training photos are drawn this many pixels on their longer side for visibility
 PICTURE_SIDE = 200  # pixels a side of each of the picture's four views
 TORN = 60.0  # degrees between neighbouring faces that make their edge a tear
+SHARD_SHARE = 0.002  # a piece of the surface cut at its tears under this share of its area: a shard
 ROUGHNESS = (0.5, 0.8, 1.0)  # the material's roughness, drawn lit at the held-out photos
 
 
@@ -135,6 +142,21 @@ def neighbour_angles(vertices: np.ndarray, faces: np.ndarray
     edges = mesh.vertices[mesh.face_adjacency_edges]
     return (np.degrees(mesh.face_adjacency_angles), mesh.face_adjacency,
             np.linalg.norm(edges[:, 0] - edges[:, 1], axis=1))
+
+
+def shards(area: np.ndarray, pairs: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces in a shard (the docstring): the pieces joined across edges of at most
+    TORN degrees (`pairs` (E, 2) of faces, `angles` (E,)) holding under SHARD_SHARE of the
+    total `area` (F,)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    smooth = pairs[angles <= TORN]
+    graph = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])),
+                       shape=(len(area), len(area)))
+    _, label = connected_components(graph, directed=False)
+    piece = np.bincount(label, weights=area)
+    return piece[label] < SHARD_SHARE * area.sum()
 
 
 def covered_hull(run, scene) -> Delaunay | None:
@@ -235,6 +257,7 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
     angles, pairs, lengths = neighbour_angles(vertices, faces)
     unseen_pair = ~seen[pairs].all(1)
     torn = lengths * (angles > TORN)
+    shard = shards(area, pairs, angles)
     orbit = side.get("orbit", {})
     if pictures is not None:
         picture(vertices, faces, uv, texture, best_azimuth(scene), pictures / f"{name}.png")
@@ -250,21 +273,25 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
             "mean_angle": round(float(angles.mean()), 1),
             "unseen_torn": round(float(torn[unseen_pair].sum() / max(lengths[unseen_pair].sum(), 1e-12)), 4),
             "seen_torn": round(float(torn[~unseen_pair].sum() / max(lengths[~unseen_pair].sum(), 1e-12)), 4),
+            "unseen_shards": round(float(area[~seen & shard].sum() / max(area[~seen].sum(), 1e-12)), 4),
+            "seen_shards": round(float(area[seen & shard].sum() / max(area[seen].sum(), 1e-12)), 4),
             "glb_mb": round(glb.stat().st_size / 1e6, 2), "triangles": int(len(faces)),
             "export_seconds": round(export_seconds, 2), "stages": side.get("seconds"),
             "covered_degrees": orbit.get("covered_degrees"), "orbit_limited": orbit.get("limited"),
             "export_angles": side.get("neighbour_angle")}
 
 
-def produce(name: str, photos: list[Path], work: Path, reuse: bool) -> float:
-    """Run `windowshop video` at the defaults into `work` (or re-export its run); export seconds."""
+def produce(name: str, photos: list[Path], work: Path, reuse: bool,
+            options: ExportOptions = ExportOptions()) -> float:
+    """Run `windowshop video` at the defaults into `work` (or re-export its run with `options`);
+    export seconds."""
     from windowshop.pipeline import make_video
 
     folder = work / name
     if reuse and (folder / "spin_work" / "run").is_dir():
         start = time.perf_counter()
         export_models(folder / "spin_work" / "run", [folder / "spin.glb", folder / "spin.usdz"],
-                      ExportOptions())
+                      options)
         return time.perf_counter() - start
     (folder / "photos").mkdir(parents=True, exist_ok=True)
     for path in photos:
@@ -283,12 +310,19 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/work/exp37"))
     parser.add_argument("--reuse", action="store_true", help="re-export the kept runs")
     parser.add_argument("--pictures", type=Path, default=None, help="folder for <capture>.png")
+    parser.add_argument("--export", action="append", default=[], metavar="KEY=VALUE",
+                        help="ExportOptions override for --reuse, e.g. close_unseen=false")
     args = parser.parse_args()
+    overrides = {}
+    for pair in args.export:
+        key, _, value = pair.partition("=")
+        overrides[key.replace("-", "_")] = json.loads(value)
+    options = ExportOptions(**overrides)
     torch.manual_seed(0)
     photos = captures(args.photos)
     print(json.dumps(machine()), flush=True)
     for name in args.rows:
-        seconds = produce(name, photos[name], args.work, args.reuse)
+        seconds = produce(name, photos[name], args.work, args.reuse, options)
         print(json.dumps(evaluate(name, args.work / name, args.pictures, seconds)), flush=True)
     print(json.dumps({"load_average_end": list(os.getloadavg())}), flush=True)
 

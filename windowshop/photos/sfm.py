@@ -57,11 +57,10 @@ CHUNK = 4  # photos per feature-extraction call (a progress step)
 FEATURE_BUDGET = 200_000
 MIN_FEATURES = 2048
 # Bundle adjustment as COLMAP's own speed-ups have it: global BA leaves out 3D points that
-# many other points already constrain, runs when the model has grown by 40% (not 10%), and
-# small problems use both cores; 88 granite photos mapped in 31 s instead of 49 (same points,
-# 0.19 px)
+# many other points already constrain and runs when the model has grown by 40% (not 10%). (It
+# runs on one thread: see mapping_options; on two, 88 granite photos mapped no faster, 10.4 s
+# against 9.3, bench/RESULTS.md)
 GLOBAL_BA_RATIO = 1.4
-BA_THREADS_FROM = 5000
 # A set of more photos than this is mapped from every other photo first, then the rest are
 # added to that model: 88 granite photos 30.9 s -> 25.1 s (7.5 s for 44, then 17.6 s), the same
 # 88 placed and 0.193 px
@@ -251,9 +250,8 @@ def mapping_options(settings: SfmSettings, relaxed: bool, lowest: bool = False
         options.mapper.abs_pose_refine_extra_params = False
     options.mapper.ba_global_ignore_redundant_points3D = True
     options.ba_global_frames_ratio = options.ba_global_points_ratio = GLOBAL_BA_RATIO
-    options.ba_min_num_residuals_for_cpu_multi_threading = BA_THREADS_FROM
     # one thread, so that the same photos give the same model: with two, the same 8 skull_up
-    # photos came out right (median 4.75 deg) in two runs of three and 17 deg off in the third
+    # photos came out right (median 4.75 deg) in four runs of eight and 5-17 deg off in the rest
     options.num_threads = options.mapper.num_threads = 1
     if relaxed:
         options.min_num_matches = 8

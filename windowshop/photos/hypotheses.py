@@ -152,6 +152,10 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
                           database=search.evidence)
 
 
+# the checks whose contradicting pairs _pruned_database drops
+PRUNED_ON = ("pairs", "background")
+
+
 def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
     """A copy of the best hypothesis's database without the pairs that contradict its model:
     strong pairs whose rotation it denies, and, when it places pairs that match only on the
@@ -160,9 +164,7 @@ def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
     model = best.sfm.reconstruction
     conflicts = [(p.first, p.second) for p, d in
                  disagreements(model, strong_pairs(model, best.sfm.database)) if p.conflicts(d)]
-    seam = background.side_by_side(best) if best.found is not None else None
-    if seam is not None and len(seam[0]) >= background.MIN_CONFLICTS:
-        conflicts += background.object_only(best)
+    conflicts += background.fold_pairs(best)
     if not conflicts:
         return None
     copy = search.work / f"database_pruned_{len(list(search.work.glob('database_pruned_*')))}.db"
@@ -175,7 +177,7 @@ def _pruned_database(search: Search, best: Hypothesis) -> Path | None:
 
 
 def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    if not any(c.name in ("pairs", "background") for c in verdict.failed):
+    if not any(c.name in PRUNED_ON for c in verdict.failed):
         return None
     database = _pruned_database(search, best)
     result = None if database is None else _remapped(search, best, "pruned", database, "incremental")
@@ -183,7 +185,7 @@ def pruned(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | N
 
 
 def global_mapper(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    if not any(c.name in ("pairs", "background") for c in verdict.failed):
+    if not any(c.name in PRUNED_ON for c in verdict.failed):
         return None  # a photo whose gravity alone disagrees is left out (without_suspects)
     database = _pruned_database(search, best)
     if database is None:  # a copy all the same: the phone's gravity is written into it

@@ -121,9 +121,8 @@ def _level_up(c2ws: np.ndarray) -> np.ndarray:
     mean_up = c2ws[:, :3, 1].mean(0)
     if np.linalg.norm(mean_up) < 1e-6:
         mean_up = np.array([0.0, 0.0, 1.0])
-    rights = c2ws[:, :3, 0]
-    eigvals, eigvecs = np.linalg.eigh(rights.T @ rights / len(rights))  # ascending
-    up = eigvecs[:, 0] if eigvals[1] > 0.02 else mean_up
+    level, _, turned = _level_of(c2ws[:, :3, 0])
+    up = level if turned > TURNED else mean_up
     up = up if up @ mean_up >= 0 else -up
     return up / np.linalg.norm(up)
 
@@ -180,8 +179,9 @@ def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
     decides the fit (a photo placed 40 degrees off tilted 12 rolled beer_can frames' up)."""
     seeds = _sphere(QUARTER_SEEDS)
     rights, ups, views = c2ws[:, :3, 0], c2ws[:, :3, 1], -c2ws[:, :3, 2]
-    nearer = np.abs(rights @ seeds.T) <= np.abs(ups @ seeds.T)  # (N, S)
-    off = np.where(nearer, np.abs(rights @ seeds.T), np.abs(ups @ seeds.T))  # sines off level
+    across, along = np.abs(rights @ seeds.T), np.abs(ups @ seeds.T)  # (N, S)
+    nearer = across <= along
+    off = np.minimum(across, along)  # sines of each photo's level axis off level
     kept = max(3, int(np.ceil(QUARTER_KEEP * len(c2ws))))
     flatness = np.mean(np.sort(off, axis=0)[:kept] ** 2, axis=0)
     axes = np.where(nearer[..., None], rights[:, None], ups[:, None])  # (N, S, 3)
@@ -194,9 +194,9 @@ def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
     for seed in seeds[order[:8]]:
         up = seed
         for _ in range(QUARTER_REFINES):
-            up, spread, spreads = _trimmed_level(_level_axes(c2ws, up), kept)
+            up, spread, turned_up = _trimmed_level(_level_axes(c2ws, up), kept)
         elevation = np.degrees(np.arcsin(np.clip(views @ up, -1.0, 1.0)))
-        refined.append((_rank(np.sin(np.radians(spread)) ** 2, spreads, elevation.std(),
+        refined.append((_rank(np.sin(np.radians(spread)) ** 2, turned_up, elevation.std(),
                               np.median(np.abs(elevation))), up, spread))
     _, up, spread = min(refined, key=lambda r: r[0])
     return up, float(spread)

@@ -84,36 +84,46 @@ def _off_object(points: np.ndarray, photo, found) -> np.ndarray:
     return ~mask[v, u]
 
 
-def object_only(hypothesis: Hypothesis) -> list[tuple[str, str]]:
-    """Every verified pair of placed, masked photos whose matches lie only on the object,
-    wherever the model puts them: once a fold is shown, the ambiguous pairs, pruned before
-    mapping again."""
-    return [(a, b) for a, b, _, _, share in background_shares(hypothesis, 0)
-            if share <= OBJECT_ONLY]
+def fold_pairs(hypothesis: Hypothesis) -> list[tuple[str, str]]:
+    """When the model places pairs matching only on the object side by side (MIN_CONFLICTS or
+    more), every verified pair of placed, masked photos whose matches lie only on the object,
+    wherever the model puts them: the ambiguous pairs of a fold, pruned before mapping again;
+    else none."""
+    if not _applies(hypothesis):
+        return []
+    shares = background_shares(hypothesis, 0)
+    found = side_by_side(shares)
+    if found is None or len(found[0]) < MIN_CONFLICTS:
+        return []
+    return [(a, b) for a, b, _, _, share in shares if share <= OBJECT_ONLY]
 
 
-def side_by_side(hypothesis: Hypothesis) -> tuple[list[tuple[str, str]], int, int] | None:
-    """(the pairs placed side by side whose matches lie only on the object, how many pairs are
-    placed side by side, how many pairs match the background), counting only pairs of photos
-    whose background some pair of theirs matches; or None where the check does not apply (no
-    outlines, or a background shown to match by fewer than MIN_LINKED pairs placed side by
-    side)."""
-    found, sfm = hypothesis.found, hypothesis.sfm
-    if found is None or not found.masks or sfm is None or sfm.database is None:
-        return None
-    shares = background_shares(hypothesis)
+def side_by_side(shares: list[tuple[str, str, int, float, float]]
+                 ) -> tuple[list[tuple[str, str]], int, int] | None:
+    """Of `shares` (background_shares): (the pairs placed side by side whose MIN_INLIERS or
+    more matches lie only on the object, how many pairs are placed side by side, how many pairs
+    match the background), counting only pairs of photos whose background some pair of theirs
+    matches; or None where the check does not apply (a background shown to match by fewer than
+    MIN_LINKED pairs placed side by side)."""
     # photos whose background is shown to match: LINKED of some pair's matches off the object
     # (a photo against a dark or plain backdrop matches only on the object with every neighbour)
-    textured = {n for a, b, _, _, share in shares if share >= LINKED for n in (a, b)}
-    near = [s for s in shares if s[3] <= NEAR_DEG and {s[0], s[1]} <= textured]
+    strong = [s for s in shares if s[2] >= MIN_INLIERS]
+    textured = {n for a, b, _, _, share in strong if share >= LINKED for n in (a, b)}
+    near = [s for s in strong if s[3] <= NEAR_DEG and {s[0], s[1]} <= textured]
     if sum(1 for *_, share in near if share >= LINKED) < MIN_LINKED:
         return None
     conflicts = [(a, b) for a, b, _, _, share in near if share <= OBJECT_ONLY]
-    return conflicts, len(near), sum(1 for *_, share in shares if share >= LINKED)
+    return conflicts, len(near), sum(1 for *_, share in strong if share >= LINKED)
+
+
+def _applies(hypothesis: Hypothesis) -> bool:
+    """Whether the hypothesis has what the check reads: outlines and the verified pairs."""
+    found, sfm = hypothesis.found, hypothesis.sfm
+    return not (found is None or not found.masks or sfm is None or sfm.database is None)
 
 
 def check(hypothesis: Hypothesis) -> Check | None:
-    found = side_by_side(hypothesis)
+    found = side_by_side(background_shares(hypothesis)) if _applies(hypothesis) else None
     if found is None:
         return None
     conflicts, near, linked = found

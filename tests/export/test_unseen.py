@@ -124,3 +124,22 @@ def test_the_hull_does_not_reach_out_to_a_floater_the_model_drops():
         hulls[share] = hull_occupancy(visibility, volume.shape, AABB, weight)
     assert (hulls[0.0][between] > 0.5).all()  # (the floater's points stretch the hull)
     assert (hulls[0.05][between] < 0.5).all()
+
+
+def test_a_surface_hidden_behind_a_nearer_one_is_not_seen():
+    """A plate stands about 0.3 (10 cells) behind a larger one, all three cameras in front of
+    both: no photo shows it, so it is unseen (the depth test's slack, TOLERANCE cells and the
+    slope's, stays under that gap; at 4 cells a fifth of it passed as seen), while the front
+    plate is seen."""
+    p = lattice()
+    front = (p[..., 0] > 0.25) & (p[..., 0] < 0.40) & np.all(np.abs(p[..., 1:]) < 0.6, axis=-1)
+    behind = (p[..., 0] > -0.1) & (p[..., 0] < 0.1) & np.all(np.abs(p[..., 1:]) < 0.35, axis=-1)
+    volume = np.where(front | behind, 2 * LEVEL, 0.0).astype(np.float32)
+    visibility = surface_visibility(volume > LEVEL, AABB, front_cameras())
+    points = visibility.points
+    facing = (points[:, 0] > 0.35) & np.all(np.abs(points[:, 1:]) < 0.5, axis=-1)
+    hidden = ((points[:, 0] > 0.05) & (points[:, 0] < 0.15)
+              & np.all(np.abs(points[:, 1:]) < 0.25, axis=-1))  # the hidden plate's front face
+    assert hidden.sum() > 20 and facing.sum() > 20
+    assert visibility.seen[facing].mean() > 0.9
+    assert visibility.seen[hidden].mean() < 0.05

@@ -53,3 +53,41 @@ def test_the_kernel_and_its_twin_see_the_same_faces():
     assert 2000 < int((twin >= 0).sum()) < 96 * 80  # the spheres fill part of the view
     assert torch.equal(fused >= 0, twin >= 0)
     assert float((fused == twin).float().mean()) > 0.995
+
+
+RASTER_SCRIPT = """
+import hashlib, numpy as np, torch, trimesh
+from windowshop.field import kernels
+from windowshop.export.raster import rasterise
+from windowshop.scene.cameras import look_at
+from windowshop.scene.types import Camera
+a = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+b = trimesh.creation.icosphere(subdivisions=3, radius=0.7)
+vertices = torch.as_tensor(np.concatenate([a.vertices, b.vertices + [0.8, 0.3, 0.2]]))
+faces = torch.as_tensor(np.concatenate([a.faces, b.faces + len(a.vertices)]), dtype=torch.int64)
+camera = Camera(150.0, 150.0, 47.0, 41.0, 96, 80,
+                look_at(np.array([3.0, -2.5, 2.0]), np.zeros(3), np.array([0.0, 0.0, 1.0])))
+assert kernels.available("cpu")
+r = rasterise(vertices, faces, camera)
+print(hashlib.sha256(r.face.numpy().tobytes() + r.bary.numpy().tobytes()).hexdigest(),
+      int((r.face >= 0).sum()))
+"""
+
+
+@pytest.mark.skipif(not kernels.available("cpu"), reason="no C compiler")
+def test_the_kernel_draws_the_same_on_any_number_of_threads():
+    """Each thread draws a band of rows: on one thread and on three (bands meeting inside both
+    spheres) every pixel gets the same face and barycentrics, to the bit."""
+    import os
+    import subprocess
+    import sys
+
+    out = {}
+    for threads in ("1", "3"):
+        env = {**os.environ, "OMP_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-c", RASTER_SCRIPT], env=env, capture_output=True,
+                              text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        out[threads] = done.stdout.split()
+    assert int(out["1"][1]) > 1000  # the spheres cover part of the view
+    assert out["1"] == out["3"]

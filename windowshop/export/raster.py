@@ -6,8 +6,9 @@ Each triangle tests the pixel centres of its bounding box (grouped by box size, 
 batched), keeps those inside it, and the nearest triangle at each pixel wins one scatter-min over
 (depth, face) keys; colour comes from the winning face, perspective-correct, from the texture
 (bilinear) or the vertex colours. Pure PyTorch, any device; on the CPU the z-buffer is the C
-kernel's (field/kernels.c rasterise_faces: the same tests in one pass over the faces; a
-400x400 view of a 100k-triangle mesh in 25 ms against 195, one thread).
+kernel's (field/kernels.c rasterise_faces: the same tests in one pass over the faces, each
+thread over its own band of rows; a 400x400 view of a 100k-triangle mesh in 25 ms against 195
+on one thread; dtu_skull's 320x240 views of 98k triangles 17 -> 10 ms on two).
 """
 
 from __future__ import annotations

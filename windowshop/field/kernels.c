@@ -501,40 +501,52 @@ void composite_rays_backward(i64 X, i64 Y, i64 Z, i64 C, const float *origins, c
  * (H*W) gets its index (-1 where none), `zbuf` (H*W) its depth. `xy` (V, 2) are the vertices'
  * pixel coordinates (centres at +0.5), `depth` (V,) their depths along the view; triangles with
  * a corner nearer than `near` are skipped. The same tests as export/raster.py's twin: a pixel is
- * inside when its three edge weights share a sign, its depth is perspective-correct. One thread:
- * the faces write one z-buffer, in order, so exact ties keep the lower index. */
+ * inside when its three edge weights share a sign, its depth is perspective-correct. Each thread
+ * owns a band of rows and draws every face's part in it, the faces in order, so exact ties keep
+ * the lower index and the result is the same on any number of threads. */
 void rasterise_faces(const double *xy, const double *depth, const i64 *faces, i64 F, i64 W, i64 H,
                      double near, double *zbuf, i64 *face) {
-    for (i64 i = 0; i < W * H; ++i) {
-        zbuf[i] = INFINITY;
-        face[i] = -1;
-    }
-    for (i64 f = 0; f < F; ++f) {
-        const i64 *v = faces + 3 * f;
-        double ax = xy[2 * v[0]], ay = xy[2 * v[0] + 1], da = depth[v[0]];
-        double bx = xy[2 * v[1]], by = xy[2 * v[1] + 1], db = depth[v[1]];
-        double cx = xy[2 * v[2]], cy = xy[2 * v[2] + 1], dc = depth[v[2]];
-        if (!(da > near && db > near && dc > near)) continue;
-        double area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
-        if (fabs(area) < 1e-12) area = 1e-12;
-        double lx = fmin(ax, fmin(bx, cx)), hx = fmax(ax, fmax(bx, cx));
-        double ly = fmin(ay, fmin(by, cy)), hy = fmax(ay, fmax(by, cy));
-        i64 x0 = (i64)fmax(0.0, ceil(lx - 0.5)), x1 = (i64)fmin((double)(W - 1), floor(hx - 0.5));
-        i64 y0 = (i64)fmax(0.0, ceil(ly - 0.5)), y1 = (i64)fmin((double)(H - 1), floor(hy - 0.5));
-        for (i64 y = y0; y <= y1; ++y) {
-            double py = (double)y + 0.5;
-            for (i64 x = x0; x <= x1; ++x) {
-                double px = (double)x + 0.5;
-                double w0 = ((cx - bx) * (py - by) - (cy - by) * (px - bx)) / area;
-                double w1 = ((ax - cx) * (py - cy) - (ay - cy) * (px - cx)) / area;
-                double w2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / area;
-                if (!((w0 >= 0 && w1 >= 0 && w2 >= 0) || (w0 <= 0 && w1 <= 0 && w2 <= 0))) continue;
-                double inv = w0 / da + w1 / db + w2 / dc;
-                double z = 1.0 / (inv > 1e-12 ? inv : 1e-12);
-                i64 i = y * W + x;
-                if (z < zbuf[i]) {
-                    zbuf[i] = z;
-                    face[i] = f;
+    i64 bands = 1;
+#ifdef _OPENMP
+    bands = omp_get_max_threads();
+#endif
+    if (bands > H) bands = H > 0 ? H : 1;
+#pragma omp parallel for schedule(static, 1) if (bands > 1)
+    for (i64 b = 0; b < bands; ++b) {
+        i64 r0 = b * H / bands, r1 = (b + 1) * H / bands;  /* rows [r0, r1) */
+        for (i64 i = r0 * W; i < r1 * W; ++i) {
+            zbuf[i] = INFINITY;
+            face[i] = -1;
+        }
+        for (i64 f = 0; f < F; ++f) {
+            const i64 *v = faces + 3 * f;
+            double ax = xy[2 * v[0]], ay = xy[2 * v[0] + 1], da = depth[v[0]];
+            double bx = xy[2 * v[1]], by = xy[2 * v[1] + 1], db = depth[v[1]];
+            double cx = xy[2 * v[2]], cy = xy[2 * v[2] + 1], dc = depth[v[2]];
+            if (!(da > near && db > near && dc > near)) continue;
+            double ly = fmin(ay, fmin(by, cy)), hy = fmax(ay, fmax(by, cy));
+            i64 y0 = (i64)fmax((double)r0, ceil(ly - 0.5));
+            i64 y1 = (i64)fmin((double)(r1 - 1), floor(hy - 0.5));
+            if (y0 > y1) continue;
+            double area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+            if (fabs(area) < 1e-12) area = 1e-12;
+            double lx = fmin(ax, fmin(bx, cx)), hx = fmax(ax, fmax(bx, cx));
+            i64 x0 = (i64)fmax(0.0, ceil(lx - 0.5)), x1 = (i64)fmin((double)(W - 1), floor(hx - 0.5));
+            for (i64 y = y0; y <= y1; ++y) {
+                double py = (double)y + 0.5;
+                for (i64 x = x0; x <= x1; ++x) {
+                    double px = (double)x + 0.5;
+                    double w0 = ((cx - bx) * (py - by) - (cy - by) * (px - bx)) / area;
+                    double w1 = ((ax - cx) * (py - cy) - (ay - cy) * (px - cx)) / area;
+                    double w2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / area;
+                    if (!((w0 >= 0 && w1 >= 0 && w2 >= 0) || (w0 <= 0 && w1 <= 0 && w2 <= 0))) continue;
+                    double inv = w0 / da + w1 / db + w2 / dc;
+                    double z = 1.0 / (inv > 1e-12 ? inv : 1e-12);
+                    i64 i = y * W + x;
+                    if (z < zbuf[i]) {
+                        zbuf[i] = z;
+                        face[i] = f;
+                    }
                 }
             }
         }

@@ -143,3 +143,20 @@ def test_a_surface_hidden_behind_a_nearer_one_is_not_seen():
     assert hidden.sum() > 20 and facing.sum() > 20
     assert visibility.seen[facing].mean() > 0.9
     assert visibility.seen[hidden].mean() < 0.05
+
+
+def test_a_hidden_surface_seen_edge_on_is_not_seen():
+    """The top of a low box stands behind a plate that hides it from all three cameras, which
+    see it nearly edge-on (cos about 0.2): its slope's allowance is capped (SLOPE_CELLS), so it
+    does not pass as seen however steep it is (uncapped, the allowance reached past the plate)."""
+    p = lattice()
+    front = (p[..., 0] > 0.25) & (p[..., 0] < 0.40) & np.all(np.abs(p[..., 1:]) < 0.6, axis=-1)
+    box = ((p[..., 0] > -0.3) & (p[..., 0] < 0.1) & (np.abs(p[..., 1]) < 0.3)
+           & (p[..., 2] > -0.3) & (p[..., 2] < 0.2))
+    volume = np.where(front | box, 2 * LEVEL, 0.0).astype(np.float32)
+    visibility = surface_visibility(volume > LEVEL, AABB, front_cameras())
+    points = visibility.points
+    top = ((points[:, 2] > 0.12) & (points[:, 2] < 0.25) & (np.abs(points[:, 1]) < 0.2)
+           & (points[:, 0] > -0.2) & (points[:, 0] < 0.0))
+    assert top.sum() > 5
+    assert visibility.seen[top].mean() < 0.05

@@ -279,8 +279,9 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
     vertices, faces, uv, texture, normals = load_glb(glb, run)
     cache = folder / "field_psnr.json"
     keys = ("psnr_field", "psnr_field_averaged", "field_iou")
-    if cache.is_file() and all(k in json.loads(cache.read_text()) for k in keys):
-        field, averaged, field_iou = (json.loads(cache.read_text())[k] for k in keys)
+    cached = json.loads(cache.read_text()) if cache.is_file() else {}
+    if all(k in cached for k in keys):
+        field, averaged, field_iou = (cached[k] for k in keys)
     else:
         field, averaged, field_iou = (masked_psnr(run, scene), view_averaged_psnr(run, scene),
                                       field_silhouette_iou(run, scene))
@@ -382,7 +383,8 @@ def main() -> None:
     options = ExportOptions(**overrides)
     torch.manual_seed(0)
     photos = captures(args.photos)
-    photos.update({name: captures(10 ** 6)[name] for name in args.whole})
+    every = captures(10 ** 6)
+    photos.update({name: every[name] for name in args.whole})
     print(json.dumps(machine()), flush=True)
     for name in args.rows:
         try:

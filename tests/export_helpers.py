@@ -4,6 +4,8 @@ export's side-file matrix has work to do (tests/export/)."""
 import dataclasses
 
 import numpy as np
+import torch
+import trimesh
 
 from windowshop.scene.cameras import look_at
 from windowshop.scene.synthetic import synthetic_scene
@@ -34,3 +36,15 @@ def top_camera(size: int = 40) -> Camera:
     """Looking straight down from z = 4 with a focal length of `size` pixels."""
     c2w = look_at(np.array([0.0, 0.0, 4.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
     return Camera(fx=size, fy=size, cx=size / 2, cy=size / 2, width=size, height=size, c2w=c2w)
+
+
+def two_spheres() -> tuple[torch.Tensor, torch.Tensor, Camera]:
+    """(vertices, faces, camera): two overlapping spheres (2,500 faces) from an oblique camera."""
+    a = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    b = trimesh.creation.icosphere(subdivisions=3, radius=0.7)
+    vertices = torch.as_tensor(np.concatenate([a.vertices, b.vertices + [0.8, 0.3, 0.2]]),
+                               dtype=torch.float32)
+    faces = torch.as_tensor(np.concatenate([a.faces, b.faces + len(a.vertices)]), dtype=torch.int64)
+    camera = Camera(150.0, 150.0, 47.0, 41.0, 96, 80,
+                    look_at(np.array([3.0, -2.5, 2.0]), np.zeros(3), np.array([0.0, 0.0, 1.0])))
+    return vertices, faces, camera

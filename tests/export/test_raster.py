@@ -1,16 +1,15 @@
 """The checking rasteriser: coverage and depth order against hand-computed answers, in the C
 kernel and in its pure-PyTorch twin, and the two against each other."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
-import trimesh
 
-from export_helpers import square, top_camera
+from export_helpers import square, top_camera, two_spheres
 from windowshop.export.raster import nearest_faces, rasterise, render_mesh, screen
 from windowshop.field import kernels
-from windowshop.scene.cameras import look_at
-from windowshop.scene.types import Camera
 
 
 def test_a_square_covers_the_pixels_its_projection_covers(zbuffer):
@@ -40,13 +39,7 @@ def test_the_nearer_face_wins_and_texture_coordinates_reach_the_texture(zbuffer)
 def test_the_kernel_and_its_twin_see_the_same_faces():
     """Two overlapping spheres (2,500 faces, depth order everywhere) from an oblique camera: the
     same pixels covered, the same face at all but pixels on an edge two faces share."""
-    a = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-    b = trimesh.creation.icosphere(subdivisions=3, radius=0.7)
-    vertices = torch.as_tensor(np.concatenate([a.vertices, b.vertices + [0.8, 0.3, 0.2]]),
-                               dtype=torch.float32)
-    faces = torch.as_tensor(np.concatenate([a.faces, b.faces + len(a.vertices)]), dtype=torch.int64)
-    camera = Camera(150.0, 150.0, 47.0, 41.0, 96, 80,
-                    look_at(np.array([3.0, -2.5, 2.0]), np.zeros(3), np.array([0.0, 0.0, 1.0])))
+    vertices, faces, camera = two_spheres()
     fused = rasterise(vertices, faces, camera).face.view(-1)
     xy, depth = screen(vertices, camera)
     twin = nearest_faces(xy, depth, faces, camera.width, camera.height, 1e-3)
@@ -56,19 +49,13 @@ def test_the_kernel_and_its_twin_see_the_same_faces():
 
 
 RASTER_SCRIPT = """
-import hashlib, numpy as np, torch, trimesh
+import hashlib, sys
+sys.path.insert(0, sys.argv[1])
+from export_helpers import two_spheres
 from windowshop.field import kernels
 from windowshop.export.raster import rasterise
-from windowshop.scene.cameras import look_at
-from windowshop.scene.types import Camera
-a = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-b = trimesh.creation.icosphere(subdivisions=3, radius=0.7)
-vertices = torch.as_tensor(np.concatenate([a.vertices, b.vertices + [0.8, 0.3, 0.2]]))
-faces = torch.as_tensor(np.concatenate([a.faces, b.faces + len(a.vertices)]), dtype=torch.int64)
-camera = Camera(150.0, 150.0, 47.0, 41.0, 96, 80,
-                look_at(np.array([3.0, -2.5, 2.0]), np.zeros(3), np.array([0.0, 0.0, 1.0])))
 assert kernels.available("cpu")
-r = rasterise(vertices, faces, camera)
+r = rasterise(*two_spheres())
 print(hashlib.sha256(r.face.numpy().tobytes() + r.bary.numpy().tobytes()).hexdigest(),
       int((r.face >= 0).sum()))
 """
@@ -85,8 +72,8 @@ def test_the_kernel_draws_the_same_on_any_number_of_threads():
     out = {}
     for threads in ("1", "3"):
         env = {**os.environ, "OMP_NUM_THREADS": threads}
-        done = subprocess.run([sys.executable, "-c", RASTER_SCRIPT], env=env, capture_output=True,
-                              text=True, timeout=300)
+        done = subprocess.run([sys.executable, "-c", RASTER_SCRIPT, str(Path(__file__).parents[1])],
+                              env=env, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]
         out[threads] = done.stdout.split()
     assert int(out["1"][1]) > 1000  # the spheres cover part of the view

@@ -66,7 +66,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     """The object of the run at `run_dir` as an Asset (see the module docstring); vertex
     colours are baked too when asked for (PLY) or when there is no texture."""
     from windowshop.export import texture as tex
-    from windowshop.export.carve import CARVE_VIEWS, carve_volume
+    from windowshop.export.carve import CARVE_VIEWS, ESTIMATED, TOLERANCE, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
     from windowshop.export.mesh import (Mesh, neighbour_angles, object_mesh, sample_volume,
@@ -98,10 +98,12 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     level, iou = choose_level(run.model, volume, box, run.train_cameras, options.level_views)
     lap("level")
     masked = None if photos is None else photos.masked().spread(CARVE_VIEWS)
-    if masked is not None and masked.cameras and np.isfinite(level):
-        volume = carve_volume(volume, box, level, masked.cameras, masked.alphas)
-        lap("carve")
     prepared = prepared_report(run.scene_source)
+    if masked is not None and masked.cameras and np.isfinite(level):
+        # a prepared capture's masks were estimated from its photos; others' came with them
+        volume = carve_volume(volume, box, level, masked.cameras, masked.alphas,
+                              ESTIMATED if prepared is not None else TOLERANCE)
+        lap("carve")
     grid, unseen, unseen_share, cut = closed_lattice(volume.cpu().numpy(), level, aabb,
                                                      run.train_cameras, options,
                                                      prepared is not None, lap)

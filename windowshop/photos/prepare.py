@@ -259,8 +259,12 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     own = points[isolated.index] if by_points else points[:0]
     lo, hi = objectbox.object_box(own, cameras, rotation,
                                   None if floor is None else (floor.normal, floor.offset))
-    if floor is not None:  # the object stands on the plane: the box's floor, under its middle
-        lo[2] = floor.z_at(rotation, (lo[:2] + hi[:2]) / 2) + floor.tolerance
+    if floor is not None:  # the object stands on the plane: the box's floor, under its middle,
+        # at the plane itself, where the object's base touches it (a tolerance above it, the
+        # base's bottom sliver was outside the box: held-out PSNR, 480 steps, fruit's and
+        # dtu_skull's 20 photos, 21.55 -> 22.03 and 24.84 -> 25.20 dB; the masks keep the
+        # table out)
+        lo[2] = floor.z_at(rotation, (lo[:2] + hi[:2]) / 2)
     transform, aabb = normalize.similarity(rotation, lo, hi)
     posed = output.normalised(posed, transform)
     found, kind, raw = {}, "none", {}

@@ -140,7 +140,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             lap("tune")
         if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
-                                   every_photo)
+                                   every_photo, estimated=prepared is not None)
             lap("refine")
         texture = tex.finish_texture(image)
         surface = unwrapped

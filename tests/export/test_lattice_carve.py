@@ -33,16 +33,22 @@ def ball_mask(camera: Camera) -> np.ndarray:
     return (closest < RADIUS).astype(np.float32)
 
 
-def test_haze_the_masks_see_as_background_is_emptied_and_the_ball_kept():
-    n = 41
-    axis = torch.linspace(-1, 1, n)
+AABB = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+
+
+def ball_in_haze() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(densities (41, 41, 41) over AABB, the ball there (bool), a sheet of haze under it)."""
+    axis = torch.linspace(-1, 1, 41)
     x, y, z = torch.meshgrid(axis, axis, axis, indexing="ij")
     ball = (x**2 + y**2 + z**2).sqrt() < RADIUS - 0.05
-    haze = ((z + 0.75).abs() < 0.03) & (x.abs() < 0.8) & (y.abs() < 0.8)  # a sheet under the ball
-    volume = 10.0 * ball.float() + 5.0 * haze.float()
-    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    haze = ((z + 0.75).abs() < 0.03) & (x.abs() < 0.8) & (y.abs() < 0.8)
+    return 10.0 * ball.float() + 5.0 * haze.float(), ball, haze
+
+
+def test_haze_the_masks_see_as_background_is_emptied_and_the_ball_kept():
+    volume, ball, haze = ball_in_haze()
     cameras = ring_cameras()
-    carved = carve_volume(volume, aabb, 1.0, cameras, [ball_mask(c) for c in cameras])
+    carved = carve_volume(volume, AABB, 1.0, cameras, [ball_mask(c) for c in cameras])
     assert torch.equal(carved[ball], volume[ball])
     assert bool((carved[haze] < 0).all())
     assert torch.equal(carved[~ball & ~haze], volume[~ball & ~haze])  # below the level: untouched
@@ -60,7 +66,7 @@ def test_the_boxes_vote_as_the_vertices_one_by_one():
     generator = torch.Generator().manual_seed(0)
     haze = torch.rand(n, n, n, generator=generator) < 0.1
     occupied = ((x**2 + 0.6 * y**2 + z**2).sqrt() < 0.8) | haze
-    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    aabb = AABB
     cameras = ring_cameras(6, 48)
     for camera in cameras[::2]:
         camera.c2w[:3, 3] *= 0.55  # close up: parts of the lattice outside the photo
@@ -82,19 +88,13 @@ def test_estimated_masks_that_miss_part_of_the_object_in_a_few_views_do_not_bite
     the ball whole, and still empty the haze every view sees on the background."""
     from windowshop.export.carve import ESTIMATED
 
-    n = 41
-    axis = torch.linspace(-1, 1, n)
-    x, y, z = torch.meshgrid(axis, axis, axis, indexing="ij")
-    ball = (x**2 + y**2 + z**2).sqrt() < RADIUS - 0.05
-    haze = ((z + 0.75).abs() < 0.03) & (x.abs() < 0.8) & (y.abs() < 0.8)
-    volume = 10.0 * ball.float() + 5.0 * haze.float()
-    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    volume, ball, haze = ball_in_haze()
     cameras = ring_cameras()
     masks = [ball_mask(c) for c in cameras]
     for mask in masks[:2]:
         mask[:, int(mask.shape[1] * 0.58):] = 0.0
-    strict = carve_volume(volume, aabb, 1.0, cameras, masks)
+    strict = carve_volume(volume, AABB, 1.0, cameras, masks)
     assert int((strict[ball] < 0).sum()) > 0.05 * int(ball.sum())  # bitten
-    carved = carve_volume(volume, aabb, 1.0, cameras, masks, ESTIMATED)
+    carved = carve_volume(volume, AABB, 1.0, cameras, masks, ESTIMATED)
     assert torch.equal(carved[ball], volume[ball])
     assert bool((carved[haze] < 0).all())

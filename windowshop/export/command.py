@@ -99,14 +99,13 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     lap("level")
     masked = None if photos is None else photos.masked().spread(CARVE_VIEWS)
     prepared = prepared_report(run.scene_source)
+    estimated = prepared is not None  # a prepared capture's masks were segmented from its photos
     if masked is not None and masked.cameras and np.isfinite(level):
-        # a prepared capture's masks were estimated from its photos; others' came with them
         volume = carve_volume(volume, box, level, masked.cameras, masked.alphas,
-                              ESTIMATED if prepared is not None else TOLERANCE)
+                              ESTIMATED if estimated else TOLERANCE)
         lap("carve")
     grid, unseen, unseen_share, cut = closed_lattice(volume.cpu().numpy(), level, aabb,
-                                                     run.train_cameras, options,
-                                                     prepared is not None, lap)
+                                                     run.train_cameras, options, estimated, lap)
     volume = torch.as_tensor(grid, device=volume.device)
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
     cell = float((aabb[1] - aabb[0]).max()) / options.resolution
@@ -140,7 +139,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             lap("tune")
         if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
-                                   every_photo, estimated=prepared is not None)
+                                   every_photo, estimated=estimated)
             lap("refine")
         texture = tex.finish_texture(image)
         surface = unwrapped

@@ -36,12 +36,12 @@ import numpy as np
 import torch
 from scipy import sparse
 
+from windowshop.export.carve import MASK_LEVEL
 from windowshop.export.photos import Photos
 from windowshop.export.raster import rasterise
 from windowshop.scene.types import Camera
 
 SUPERSAMPLE = 1  # samples a pixel side
-MASK_LEVEL = 0.5  # alpha under which an estimated mask calls a pixel background
 WEIGHT = 0.2  # of the prior towards the baked colours, per texel (a pixel's weights sum to 1)
 ITERATIONS = 15  # conjugate-gradient steps (15 and 60 score the same on lego)
 

@@ -227,7 +227,9 @@ class ExportOptions:
     # photos' pixels on the object are coarser (export.texture.bake_size); 0: vertex colours only
     texture: int = 2048
     size_cm: float | None = None  # scale the object to this real height (None: the scene's own units)
-    resolution: int = 256  # marching-cubes cells along the longest side of the object's box
+    # marching-cubes cells along the longest side of the object's box at most (a grid field's
+    # lattice has 1.5 cells a voxel of its grid: export.mesh.lattice_resolution)
+    resolution: int = 256
     level_views: int = 8  # training views whose silhouettes choose the surface's density level
     bake_views: int = 24  # training photos projected onto the mesh for its colour (0: the field's)
     settle: bool = True  # move the surface to where those photos agree (export/settle.py)

@@ -15,7 +15,7 @@ from windowshop.config import ExportOptions
 from windowshop.errors import UserError
 from windowshop.export.command import export_models, side_file
 from windowshop.export.frame import apply
-from windowshop.export.mesh import Mesh, drop_fins, open_edges
+from windowshop.export.mesh import Mesh, drop_fins, lattice_resolution, open_edges
 from windowshop.rays import project
 
 SMALL = ExportOptions(triangles=1500, texture=256, resolution=48)
@@ -150,3 +150,18 @@ def test_folded_fins_cancel_in_pairs_and_leave_the_surface_closed():
     assert len(kept) == 4 and not np.isin(4, kept)
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)
     assert open_edges(Mesh(vertices, kept)) == 0
+
+
+def test_the_lattice_resolves_the_field_voxels_and_no_finer():
+    from windowshop.field.fast import FastModel
+    from windowshop.config import FastConfig
+    from windowshop.model import Bounds
+
+    aabb = np.array([[-1.0, -0.5, -0.25], [1.0, 0.5, 0.25]])
+    model = FastModel(FastConfig(voxels=16 * 8 * 4, growth=()),
+                      Bounds(aabb=tuple(map(tuple, aabb)), near=0.1, far=10.0))
+    voxel = 2.0 / (model.density_grid.shape[0] - 1)  # the grid's vertices span the box
+    assert float(model.density_grid.voxel.min()) == pytest.approx(voxel)
+    assert lattice_resolution(model, aabb, 256) == int(np.ceil(1.5 * 2.0 / voxel))
+    assert lattice_resolution(model, aabb, 12) == 12  # the option caps it
+    assert lattice_resolution(torch.nn.Linear(1, 1), aabb, 100) == 100  # no grid: the option

@@ -69,8 +69,8 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.carve import CARVE_VIEWS, ESTIMATED, TOLERANCE, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
-    from windowshop.export.mesh import (Mesh, neighbour_angles, object_mesh, sample_volume,
-                                        taubin, vertex_normals)
+    from windowshop.export.mesh import (Mesh, lattice_resolution, neighbour_angles, object_mesh,
+                                        sample_volume, taubin, vertex_normals)
     from windowshop.export.support import flatten_base, plane_found, prepared_report
     from windowshop.export.unseen import weight_at
     from windowshop.export.orbit import covered_orbit
@@ -92,7 +92,8 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     photos = training_photos(run)
     lap("photos")
     aabb = np.asarray(run.bounds.aabb, dtype=np.float64)
-    volume = sample_volume(run.model, aabb, options.resolution)
+    resolution = lattice_resolution(run.model, aabb, options.resolution)
+    volume = sample_volume(run.model, aabb, resolution)
     lap("volume")
     box = torch.as_tensor(aabb, dtype=torch.float32, device=volume.device)
     level, iou = choose_level(run.model, volume, box, run.train_cameras, options.level_views)
@@ -108,7 +109,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
                                                      run.train_cameras, options, estimated, lap)
     volume = torch.as_tensor(grid, device=volume.device)
     mesh = object_mesh(volume, level, aabb, options.triangles, options.keep_share)
-    cell = float((aabb[1] - aabb[0]).max()) / options.resolution
+    cell = float((aabb[1] - aabb[0]).max()) / resolution
     if cut is not None:
         mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
     lap("mesh")
@@ -157,7 +158,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         colours = np.round(255 * tex.surface_colour(run.model, vertices, normals, depths, photos,
                                                     cell, occluders, unseen=fade))
         lap("vertex colours")
-    info = {"run": str(Path(run_dir).resolve()), "level": level, "silhouette_iou": round(iou, 4),
+    info = {"run": str(Path(run_dir).resolve()), "lattice_cells": resolution, "level": level, "silhouette_iou": round(iou, 4),
             "triangles": int(len(faces)), "texture": 0 if texture is None else texture.shape[0],
             "photos": 0 if photos is None else len(photos.cameras),
             "unseen_share": round(unseen_share, 4), "support_cut": cut is not None,

@@ -19,12 +19,32 @@ from windowshop.errors import UserError
 from windowshop.model import RadianceModel
 
 
+# lattice cells a field voxel: real captures' fields (95-139 voxels along the box's longest side)
+# exported at 1.5 cells a voxel instead of 256 cells: the GLB +0.1..+0.5 dB at held-out photos on
+# three of four captures, kermit -0.04, and dtu_skull's export 2 s faster; lego's field (175
+# voxels) keeps 256 (at 160 cells it lost 0.6 dB): bench/RESULTS.md
+CELLS_PER_VOXEL = 1.5
+MIN_CELLS = 8
+
+
 @dataclass
 class Mesh:
     """A triangle mesh in the scene's normalised frame."""
 
     vertices: np.ndarray  # (V, 3) float64
     faces: np.ndarray  # (F, 3) int64, counter-clockwise seen from outside
+
+
+def lattice_resolution(model: RadianceModel, aabb: np.ndarray, most: int) -> int:
+    """Cells along the longest side of `aabb` (2, 3) for the lattice of `model`'s density:
+    CELLS_PER_VOXEL a voxel of a grid field, at most `most` (`most` for a field with no grid).
+    Finer, marching cubes traces only the grid's trilinear interpolation between voxels, and the
+    export's later steps (carve, settle, tune, bake), which work in cells, work on that noise."""
+    grid = getattr(model, "density_grid", None)
+    if grid is None:
+        return most
+    cells = CELLS_PER_VOXEL * float((aabb[1] - aabb[0]).max()) / float(grid.voxel.min())
+    return int(min(most, max(MIN_CELLS, np.ceil(cells))))
 
 
 def lattice_shape(aabb: np.ndarray, resolution: int) -> tuple[int, int, int]:

@@ -20,9 +20,10 @@ from windowshop.model import RadianceModel
 
 
 # lattice cells a field voxel: real captures' fields (95-139 voxels along the box's longest side)
-# exported at 1.5 cells a voxel instead of 256 cells: the GLB +0.1..+0.5 dB at held-out photos on
-# three of four captures, kermit -0.04, and dtu_skull's export 2 s faster; lego's field (175
-# voxels) keeps 256 (at 160 cells it lost 0.6 dB): bench/RESULTS.md
+# exported at 1.5 cells a voxel instead of 256 cells: the GLB at held-out photos dtu_skull +0.26,
+# fruit +0.38, beer_can +0.10, kermit -0.18 dB, kermit's faces outside its covered hull 15 -> 0,
+# dtu_skull's export 15 -> 9.5 s (ordinary CPU); lego's field (175 voxels) keeps 256 (at 160
+# cells it lost 0.6 dB). bench/RESULTS.md
 CELLS_PER_VOXEL = 1.5
 MIN_CELLS = 8
 

@@ -8,6 +8,9 @@ cheapest first, each verified in turn, until one passes or the time limit
     where they look   no object stood out among the sparse points: the object is where the
                       photos look, found by its masks (the visual hull of GrabCut's outlines)
     photos' up        the upright check failed: up from the photos' level instead of the plane
+    another start     the silhouettes or scale check failed (a model whose photos' outlines or
+                      distances deny it, though no pair contradicts it): mapped again from the
+                      strongest verified pairs in turn, as the mapper's own start grew it wrong
     pruned            the pairs or background check failed: the contradicting pairs dropped
                       from the matches (pair pruning, as Cui & Tan 2015), mapped again
     global            the same matches through pycolmap's global mapper (rotation averaging,
@@ -125,9 +128,10 @@ def looked_at(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis 
                       by_points=False)
 
 
-def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapper: str
-              ) -> sfm_.SfmResult | None:
-    """A new SfmResult from `database`'s matches by the incremental ("relaxed") or global mapper."""
+def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapper: str,
+              pair: tuple[int, int] | None = None) -> sfm_.SfmResult | None:
+    """A new SfmResult from `database`'s matches by the incremental ("relaxed"; started from the
+    images `pair` when given) or global mapper."""
     out = search.work / f"sparse_{label}"
     out.mkdir(parents=True, exist_ok=True)
     if mapper == "global":
@@ -140,7 +144,7 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
         model = max(models.values(), key=lambda r: r.num_reg_images()) if models else None
     else:
         model = sfm_.map_once(database, search.image_dir, out, search.settings, True,
-                              lambda n: None)
+                              lambda n: None, pair=pair)
     if model is None:
         return None
     placed = sorted(im.name for im in model.images.values() if im.has_pose)
@@ -150,6 +154,37 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
                           unplaced=sorted(set(search.names) - set(placed)),
                           keypoints=best.sfm.keypoints,  # the same features, matched again
                           database=search.evidence)
+
+
+# the checks that say a model's geometry is wrong where its pairs need not contradict it
+RESTARTED_ON = ("silhouettes", "scale")
+STARTS = 2  # the strongest pairs tried as another start, at most
+
+
+def strongest_pairs(database: Path) -> list[tuple[int, int, str, str]]:
+    """(id, id, name, name) of the database's verified pairs, the most inliers first."""
+    with pycolmap.Database.open(database) as db:
+        names = {image.image_id: image.name for image in db.read_all_images()}
+        ids, geometries = db.read_two_view_geometries()
+    found = sorted(((len(g.inlier_matches),) + pycolmap.pair_id_to_image_pair(i)
+                    for i, g in zip(ids, geometries)), reverse=True)
+    return [(a, b, names[a], names[b]) for _, a, b in found]
+
+
+def another_start(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
+    """The first model, started from one of the STARTS strongest pairs, that places as many
+    photos as `best` (skull_up's 8 photos looking up: the mapper's own start placed 6, a
+    silhouette agreement of 0.00; from the strongest pair all 8 right, median 2 degrees)."""
+    if not any(c.name in RESTARTED_ON for c in verdict.failed):
+        return None
+    for first, second, one, other in strongest_pairs(search.evidence)[:STARTS]:
+        if time.perf_counter() > search.deadline:
+            break
+        result = _remapped(search, best, f"start_{first}_{second}", search.evidence,
+                           "incremental", pair=(first, second))
+        if result is not None and len(result.placed) >= len(best.sfm.placed):
+            return Hypothesis(f"started from {one} and {other}", result, up=search.up)
+    return None
 
 
 # the checks whose contradicting pairs _pruned_database drops
@@ -217,7 +252,8 @@ def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypo
 
 # photos' up again last: leaving photos out can leave the rest agreeing on a level the plane
 # denies (temple's 8-photo ring without its 3 misplaced photos: the plane 44 degrees off)
-STRATEGIES = (looked_at, photos_up, pruned, global_mapper, without_suspects, photos_up)
+STRATEGIES = (looked_at, photos_up, another_start, pruned, global_mapper, without_suspects,
+              photos_up)
 
 
 def choose(search: Search, first: sfm_.SfmResult) -> Choice:

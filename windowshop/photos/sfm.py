@@ -267,9 +267,11 @@ def mapping_options(settings: SfmSettings, relaxed: bool, lowest: bool = False
 
 def map_once(database: Path, image_dir: Path, out: Path, settings: SfmSettings, relaxed: bool,
              advance, lowest: bool = False, start: pycolmap.Reconstruction | None = None,
-             only: list[str] | None = None) -> pycolmap.Reconstruction | None:
+             only: list[str] | None = None, pair: tuple[int, int] | None = None
+             ) -> pycolmap.Reconstruction | None:
     """The largest model incremental mapping builds (None if it builds none), growing `start`
-    when given, from the images `only` when given (else all)."""
+    when given, from the images `only` when given (else all), starting from the images `pair`
+    (database ids) when given (else the mapper's own choice)."""
     out.mkdir(parents=True, exist_ok=True)
     given = ""
     if start is not None:
@@ -279,6 +281,8 @@ def map_once(database: Path, image_dir: Path, out: Path, settings: SfmSettings, 
     options = mapping_options(settings, relaxed, lowest)
     if only is not None:
         options.image_names = only
+    if pair is not None:
+        options.init_image_id1, options.init_image_id2 = pair
     models = pycolmap.incremental_mapping(
         database, image_dir, out, input_path=given, options=options,
         initial_image_pair_callback=lambda: advance(2), next_image_callback=lambda: advance(1))

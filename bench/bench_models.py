@@ -23,6 +23,8 @@ frame through its side file, drawn with windowshop.export.raster at the run's he
   move with the camera, are not in it);
 - iou: the GLB's silhouette against the mask; field_iou: the field's own silhouette (opacity
   over one half) against it, where the masks, made photo by photo, agree with one another;
+  iou_one_pixel_off: each mask against itself one pixel thinner, what an outline off by one
+  pixel all round would score (a small object in the photo scores under 0.95 that way);
 - faces_outside: faces whose centre lies outside the covered region's hull plus a margin: the
   convex hull of the delivered faces some training photo saw (as below), grown by MARGIN of the
   box's diagonal (shards on the side no photo saw stand outside it); outside_mask_hull: the same
@@ -61,6 +63,7 @@ import numpy as np
 import torch
 import trimesh
 from PIL import Image
+from scipy import ndimage
 from scipy.spatial import Delaunay
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -287,6 +290,8 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
                                       field_silhouette_iou(run, scene))
         cache.write_text(json.dumps(dict(zip(keys, (field, averaged, field_iou)))))
     glb_scores, ssaa_scores, ious, lit_scores = [], [], [], {r: [] for r in ROUGHNESS}
+    one_pixel = []  # the IoU of each mask with itself one pixel thinner: what an outline one
+    # pixel off all round scores, for the 0.95 goal against the object's size in the photo
     for view in held_out_views(scene):
         image, silhouette = render_mesh(vertices, faces, view.camera, (1.0, 1.0, 1.0), uv=uv,
                                         texture=texture)
@@ -301,6 +306,7 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
             gain = float(x @ y / max(x @ x, 1e-12))
             lit_scores[r].append(psnr(np.clip(shaded[inside] * gain, 0, 1), truth[inside]))
         ious.append(float((inside & silhouette).sum() / max((inside | silhouette).sum(), 1)))
+        one_pixel.append(float(ndimage.binary_erosion(inside).sum() / max(inside.sum(), 1)))
     hull = covered_hull(run, scene)
     centres = vertices[faces].mean(1)
     outside_mask = -1 if hull is None else int((hull.find_simplex(centres) < 0).sum())
@@ -325,7 +331,7 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
             "psnr_glb_ssaa2": round(float(np.mean(ssaa_scores)), 2),
             "psnr_lit": {str(r): round(float(np.mean(v)), 2) for r, v in lit_scores.items()},
             "iou": round(float(np.mean(ious)), 4), "iou_min": round(float(np.min(ious)), 4),
-            "field_iou": round(field_iou, 4),
+            "field_iou": round(field_iou, 4), "iou_one_pixel_off": round(float(np.mean(one_pixel)), 4),
             "faces_outside": outside, "outside_mask_hull": outside_mask,
             "unseen_share": round(float(area[~seen].sum() / area.sum()), 4),
             "unseen_angle": round(float(angles[unseen_pair].mean()), 1) if unseen_pair.any() else None,

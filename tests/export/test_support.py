@@ -65,3 +65,21 @@ def test_the_floor_is_the_lowest_layer_the_object_occupies():
     volume = np.roll(can_on_a_shadow(), 10, axis=2)  # the can and its shadow 10 cells up
     _, cut_z, floor_z = cut_support(volume, LEVEL, AABB)
     assert floor_z == pytest.approx(10 * CELL) and cut_z > floor_z
+
+
+def test_low_small_pieces_on_the_support_go_and_a_second_object_stays():
+    """Beside a can: lumps on the floor (a plate's visual hull: low, small) go; a second can (a
+    pair) and a low wide box larger than SMALL of the can stay."""
+    axes = [np.linspace(AABB[0, i], AABB[1, i], N) for i in range(3)]
+    x, y, z = np.meshgrid(*axes, indexing="ij")
+    can = (np.hypot(x + 0.5, y) < 0.25) & (z < 1.2)
+    pair = (np.hypot(x - 0.5, y) < 0.25) & (z < 1.2)
+    lumps = [(np.hypot(x - px, y - 0.7) < 0.06) & (z < 0.25) for px in (-0.6, 0.0, 0.6)]
+    box = (np.abs(x) < 0.6) & (np.abs(y + 0.65) < 0.3) & (z < 0.2)  # low, a third of a can
+    volume = np.where(can | pair | box | np.any(lumps, axis=0), 2 * LEVEL, 0.0).astype(np.float32)
+    cut, _, _ = cut_support(volume, LEVEL, AABB)
+    kept = cut > LEVEL
+    above = z > 0.1  # above the cut layers
+    assert not any((kept & lump).any() for lump in lumps)
+    for part in (can, pair, box):
+        assert (kept[part & above]).all()

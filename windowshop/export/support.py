@@ -13,6 +13,12 @@ the object occupies (the floor):
 - within BAND of the height above the floor, columns outside the object's footprint just above
   that band (grown by GROW cells) that stop within the band are emptied: a shadow lies flat, a
   wide base of the object itself stands taller than the band.
+- then pieces left apart from the object on the support, low (their top within LOW of the
+  object's height above the floor) and small (under SMALL of the largest piece's voxels), are
+  debris of the support: a plate's visual hull, the rest of a shadow. (A figure on a white
+  plate, rendered: the masks hold the plate, the field fills the hull above its rim with white
+  lumps up to a quarter of the figure's height, which the band does not reach: 12 of 15 pieces,
+  8% of the voxels, gone. A second object of its own, a shoe beside its pair, is kept.)
 After marching cubes (and again after the surface is moved), `flatten_base` puts the cap's
 vertices on the floor, so the model stands flat on the plane.
 """
@@ -29,6 +35,8 @@ CUT = 1.5  # cells above the floor emptied at least
 CUT_SHARE = 0.01  # of the object's height above the floor emptied at least
 BAND = 0.1  # of the object's height: how high a shadow's slab may reach
 GROW = 2  # cells the footprint grows by
+LOW = 0.25  # of the object's height: a separate piece whose top is under this may be debris ...
+SMALL = 0.1  # ... when it holds under this share of the largest piece's voxels
 
 
 def prepared_report(scene_source: str | Path) -> dict | None:
@@ -70,8 +78,27 @@ def cut_support(volume: np.ndarray, level: float, aabb: np.ndarray
     cut = int(np.ceil(max(CUT, CUT_SHARE * height)))
     out[:, :, :cut + 1] = 0.0
     whole = volume.copy()
-    whole[:, :, floor:] = out
+    whole[:, :, floor:] = drop_debris(out, level, height)
     return whole, float(aabb[0, 2] + (floor + cut) * cell), float(aabb[0, 2] + floor * cell)
+
+
+def drop_debris(volume: np.ndarray, level: float, height: int) -> np.ndarray:
+    """`volume` (X, Y, Z), its lowest layer the floor, without the separate pieces (above
+    `level`) that stay under LOW of the object's `height` (cells) and hold under SMALL of the
+    largest piece's voxels (the module docstring)."""
+    labels, count = ndimage.label(volume > level)
+    if count < 2:
+        return volume
+    index = np.arange(1, count + 1)
+    voxels = ndimage.sum(volume > level, labels, index)
+    layer = np.broadcast_to(np.arange(volume.shape[2]), volume.shape)
+    tops = np.asarray(ndimage.maximum(layer, labels, index))
+    debris = index[(voxels < SMALL * voxels.max()) & (tops < LOW * height)]
+    if not len(debris):
+        return volume
+    out = volume.copy()
+    out[np.isin(labels, debris)] = 0.0
+    return out
 
 
 def flatten_base(vertices: np.ndarray, cut_z: float, floor_z: float, cell: float) -> np.ndarray:

@@ -158,7 +158,8 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         colours = np.round(255 * tex.surface_colour(run.model, vertices, normals, depths, photos,
                                                     cell, occluders, unseen=fade))
         lap("vertex colours")
-    info = {"run": str(Path(run_dir).resolve()), "lattice_cells": resolution, "level": level, "silhouette_iou": round(iou, 4),
+    info = {"run": str(Path(run_dir).resolve()), "lattice_cells": resolution, "level": level,
+            "silhouette_iou": round(iou, 4),
             "triangles": int(len(faces)), "texture": 0 if texture is None else texture.shape[0],
             "photos": 0 if photos is None else len(photos.cameras),
             "unseen_share": round(unseen_share, 4), "support_cut": cut is not None,

@@ -77,31 +77,27 @@ def cut_support(volume: np.ndarray, level: float, aabb: np.ndarray
     out[slab, :band] = 0.0
     cut = int(np.ceil(max(CUT, CUT_SHARE * height)))
     out[:, :, :cut + 1] = 0.0
+    drop_debris(out, level, height)
     whole = volume.copy()
-    whole[:, :, floor:] = drop_debris(out, level, height)
+    whole[:, :, floor:] = out
     return whole, float(aabb[0, 2] + (floor + cut) * cell), float(aabb[0, 2] + floor * cell)
 
 
-def drop_debris(volume: np.ndarray, level: float, height: int) -> np.ndarray:
-    """`volume` (X, Y, Z), its lowest layer the floor, without the separate pieces (above
+def drop_debris(volume: np.ndarray, level: float, height: int) -> None:
+    """Empty, in `volume` (X, Y, Z) whose lowest layer is the floor, the separate pieces (above
     `level`) that stay under LOW of the object's `height` (cells) and hold under SMALL of the
     largest piece's voxels (the module docstring)."""
     labels, count = ndimage.label(volume > level)
     if count < 2:
-        return volume
+        return
     voxels = np.bincount(labels.ravel(), minlength=count + 1)[1:]
     # each piece's top from its bounding slices (a tenth of the time of ndimage.maximum over
     # the lattice: 0.03 s against 0.3 s on fruit's)
     boxes = ndimage.find_objects(labels)
     tops = np.array([box[2].stop - 1 for box in boxes])
-    debris = np.flatnonzero((voxels < SMALL * voxels.max()) & (tops < LOW * height))
-    if not len(debris):
-        return volume
-    out = volume.copy()
-    for piece in debris:
+    for piece in np.flatnonzero((voxels < SMALL * voxels.max()) & (tops < LOW * height)):
         box = boxes[piece]
-        out[box][labels[box] == piece + 1] = 0.0
-    return out
+        volume[box][labels[box] == piece + 1] = 0.0
 
 
 def flatten_base(vertices: np.ndarray, cut_z: float, floor_z: float, cell: float) -> np.ndarray:

@@ -115,6 +115,18 @@ def test_the_box_stands_on_the_table_itself(granite):
     assert abs(floor[2]) < 0.003 * distance, (floor, distance)
 
 
+def test_with_the_time_spent_the_strategies_that_reuse_a_model_still_run(granite, tmp_path):
+    """The time limit stops only the strategies that map again: with none left, the granite
+    figure is still found where the photos look (a verification's cost), not refused."""
+    root, _ = granite
+    result = prepare(root / "capture" / "images", tmp_path / "scene",
+                     PrepareOptions(verify_seconds=0.0), show=False)
+    verification = result.report["verification"]
+    assert verification["verified"]
+    assert verification["chosen"].startswith("where the photos look")
+    assert _right_share(tmp_path / "scene", root / "capture") >= RIGHT_SHARE
+
+
 SKULL = DATA / "dtu_skull"
 
 

@@ -2,8 +2,9 @@
 
 Structure from motion gives one model; prepare no longer trusts it blindly. The model is
 verified; while it fails, the strategies below make other hypotheses from the best one so far,
-cheapest first, each verified in turn, until one passes or the time limit
-(`PrepareOptions.verify_seconds`) is spent:
+cheapest first, each verified in turn, until one passes. Once the time limit
+(`PrepareOptions.verify_seconds`) is spent, no strategy that maps again (MAPS_AGAIN) starts;
+those that reuse a model already made cost one verification (a second or two) and still run:
 
     where they look   no object stood out among the sparse points: the object is where the
                       photos look, found by its masks (the visual hull of GrabCut's outlines)
@@ -52,7 +53,7 @@ class Search:
     settings: sfm_.SfmSettings
     locate: Callable  # prepare.locate(sfm, pixels, options, up=...)
     check_placed: Callable  # (SfmResult) -> None, UserError when too few are placed
-    deadline: float  # time.perf_counter() by which no new strategy starts
+    deadline: float  # time.perf_counter() after which no strategy in MAPS_AGAIN starts
     evidence: Path  # the database of every verified pair, which every hypothesis is held to
     # the phone's up in each photo's camera frame by image file name (capture.json), and so
     # where a new hypothesis takes up from: "gravity" with it, else "plane"
@@ -250,6 +251,9 @@ def without_suspects(search: Search, best: Hypothesis, verdict: Verdict) -> Hypo
                       by_points=best.by_points)
 
 
+# the strategies that run the mapper again (seconds each); the others reuse a model already made
+MAPS_AGAIN = (another_start, pruned, global_mapper)
+
 # photos' up again last: leaving photos out can leave the rest agreeing on a level the plane
 # denies (temple's 8-photo ring without its 3 misplaced photos: the plane 44 degrees off)
 STRATEGIES = (looked_at, photos_up, another_start, pruned, global_mapper, without_suspects,
@@ -262,8 +266,10 @@ def choose(search: Search, first: sfm_.SfmResult) -> Choice:
     tried = [Tried(hypothesis, evaluate(search, hypothesis))]
     for strategy in STRATEGIES:
         best = max(tried, key=lambda t: t.verdict.rank())
-        if best.verdict.passed or time.perf_counter() > search.deadline:
+        if best.verdict.passed:
             break
+        if strategy in MAPS_AGAIN and time.perf_counter() > search.deadline:
+            continue
         start = time.perf_counter()
         made = strategy(search, best.hypothesis, best.verdict)
         if made is None:

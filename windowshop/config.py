@@ -174,7 +174,7 @@ class PrepareOptions:
     overwrite: bool = False  # replace an earlier prepare's output folder
     seed: int = 0  # random seed of structure from motion
     verbose: bool = False  # pycolmap's own logging
-    verify_seconds: float = 45.0  # seconds for other hypotheses when the cameras fail their checks
+    verify_seconds: float = 45.0  # seconds within which a hypothesis that maps again may start
     force: bool = False  # deliver the best hypothesis even when none passes its checks (unverified)
 
 

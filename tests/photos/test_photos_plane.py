@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -117,3 +119,35 @@ def test_a_wall_behind_the_object_is_no_support_for_upright_photos():
                for a in np.linspace(-0.8, 0.8, 9)]
     isolated = plane.isolate(np.concatenate([blob, wall]), cameras)
     assert isolated.plane is None and isolated.up[2] > 0.95
+
+
+def _face_and_back(rng: np.random.Generator) -> np.ndarray:
+    """(P, 3) points of an object whose textured front face (the plane y = -0.4, 2000 points)
+    outnumbers those of the rest of it, behind and before that face (about 270)."""
+    face = np.column_stack([rng.uniform(-0.4, 0.4, 2000), np.full(2000, -0.4),
+                            rng.uniform(0.0, 1.0, 2000)])
+    rest = rng.uniform([-0.4, -0.6, 0.0], [0.4, 0.4, 1.0], size=(300, 3))
+    rest = rest[np.abs(rest[:, 1] + 0.4) > 0.05]
+    return np.concatenate([face, rest])
+
+
+def test_a_plane_far_off_the_photos_level_is_dropped_with_their_up():
+    """Up from the photos' level (they turn round z): a plane fitted to the object's own side
+    (82 degrees off, as on temple's 4-photo ring) is no support, and the object's points are
+    all where the views meet, behind it too; a plane tilted 30 degrees stays the support."""
+    rng = np.random.default_rng(6)
+    points = _face_and_back(rng)
+    cameras = [_rolled(4 * np.array([np.sin(a), -np.cos(a), 0.4]), np.array([0, 0, 0.5]),
+                       np.array([0.0, 0.0, 1.0]), 0.0) for a in np.linspace(-0.6, 0.6, 6)]
+    level = np.array([0.0, 0.0, 1.0])
+    side = plane.Plane(normal=_rotation(np.array([1.0, 0, 0]), 82.0) @ level, offset=0.0,
+                       tolerance=0.01, inlier_share=0.8)
+    in_front = np.flatnonzero(points[:, 1] < -0.41)
+    isolated = plane.level_up(plane.Isolated(side, side.normal, in_front), level, points, cameras)
+    assert isolated.plane is None and isolated.up_source == "photos"
+    assert np.allclose(isolated.up, level)
+    behind = points[isolated.index, 1] > -0.39
+    assert behind.sum() > 100  # the rest of the object, not only what stands before the face
+    tilted = replace(side, normal=_rotation(np.array([1.0, 0, 0]), 30.0) @ level)
+    kept = plane.level_up(plane.Isolated(tilted, tilted.normal, in_front), level, points, cameras)
+    assert kept.plane is tilted and np.array_equal(kept.index, in_front)

@@ -173,7 +173,7 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
         if by_points and len(chosen) < MIN_OBJECT_POINTS:  # nothing on it: a wall behind
             plane, chosen = None, None
     if plane is None:
-        chosen = _most_seen(points, cameras, np.ones(len(points), dtype=bool))
+        chosen = where_views_meet(points, cameras)
     if by_points and len(chosen) < MIN_OBJECT_POINTS:
         raise UserError(f"no object found: only {len(chosen)} points that most photos see sit "
                         f"where the photos meet (at least {MIN_OBJECT_POINTS} are needed); "
@@ -184,6 +184,22 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
         return Isolated(plane=plane, up=plane.normal, index=chosen)
     up, source = _cameras_up(np.stack([c.c2w for c in cameras]))
     return Isolated(plane=None, up=up, index=chosen, up_source=source)
+
+
+def level_up(isolated: Isolated, level: np.ndarray, points: np.ndarray,
+             cameras: list[Camera]) -> Isolated:
+    """`isolated` with up from the photos' `level` (3,) instead of its plane. A plane more than
+    WALL_ANGLE off that level is a wall or the object's own side, as for upright photos in
+    `isolate`: it is dropped, and the object's points are all those where the views meet, not
+    only the ones in front of it (temple's 4-photo ring, its photos turned a quarter: a face of
+    the temple taken for the support, 82 degrees off their level, left the rest of the temple
+    out of its box and cut its masks in two). A plane nearer the level stays the support, its
+    fit tilted by few points."""
+    found = isolated.plane
+    if found is not None and found.normal @ level < np.cos(np.radians(WALL_ANGLE)):
+        return Isolated(plane=None, up=level, index=where_views_meet(points, cameras),
+                        up_source="photos")
+    return Isolated(plane=found, up=level, index=isolated.index, up_source="photos")
 
 
 def _cameras_up(c2ws: np.ndarray) -> tuple[np.ndarray, str]:
@@ -203,6 +219,11 @@ def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:
         return False
     cosine = float(found.normal @ mean_up) / np.linalg.norm(mean_up)
     return cosine < np.cos(np.radians(WALL_ANGLE))
+
+
+def where_views_meet(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """(Q,) indices of the `points` (P, 3) that are the object's with no plane to stand on."""
+    return _most_seen(points, cameras, np.ones(len(points), dtype=bool))
 
 
 def _most_seen(points: np.ndarray, cameras: list[Camera], allowed: np.ndarray) -> np.ndarray:

@@ -247,12 +247,12 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
             raise UserError("none of the placed photos carries the phone's gravity")
     isolated = plane.isolate(points, cameras, options.seed, by_points,
                              None if measured is None else measured[0])
-    up_source, floor = isolated.up_source, isolated.plane
+    floor = isolated.plane
     if up == "photos":
         level = agreed_level(np.stack([c.c2w for c in cameras]))
         if level is None:
             raise UserError("the photos do not agree on which way is up (taken at many rolls)")
-        isolated, up_source, floor = replace(isolated, up=level), "photos", None
+        isolated, floor = plane.level_up(isolated, level, points, cameras), None
     rotation = normalize.rotation_to_z(isolated.up)
     # where the photos look, the points above the plane are the table's strays, not the object:
     # their box (3.2 x 0.44 on 88 granite photos at SIFT's coarser octave) cut the figure's top
@@ -284,7 +284,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     # with masks the model learns the object alone, over random backgrounds (Scene "alpha")
     return Located(photos=posed, transform=transform, aabb=aabb, points=chosen, masks=found,
                    mask_kind=kind, background="alpha" if found else "white",
-                   plane=isolated.plane, raw_masks=raw, up_source=up_source)
+                   plane=isolated.plane, raw_masks=raw, up_source=isolated.up_source)
 
 
 def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,

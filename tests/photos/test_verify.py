@@ -231,6 +231,32 @@ def test_a_refusal_reports_the_failure_of_the_latest_of_equally_ranked_hypothese
     assert hypotheses.fallback(better) is better[1]  # as many failed, more checks made
 
 
+def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
+    """The photos' up answers a failed upright check (temple/8@0: a plane 82 degrees off the
+    photos' level); when it then fails its silhouettes, the refusal says so, not the lean."""
+    from windowshop.photos.located import Located
+    from windowshop.photos.output import PosedPhoto
+
+    cameras = _ring(8, np.array([0, 0, 1.0]))
+    photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", c, {}) for k, c in enumerate(cameras)]
+    found = Located(photos=photos, transform=np.eye(4), aabb=np.array([[-1.0] * 3, [1.0] * 3]),
+                    points=np.zeros((0, 3)), masks={}, mask_kind="segmented", background="",
+                    plane=None, up_source="photos")
+    level = upright.check(Hypothesis("photos' up", sfm=None, found=found))
+    assert level.passed and "photos' own level" in level.detail
+    lean = Check("upright", -70.0, 0.0, "the support plane's up is 81.8 deg from the photos' own",
+                 upright.ADVICE)
+    outlines = Check("silhouettes", 0.57, silhouettes.PASS_IOU, "median agreement 0.57",
+                     silhouettes.ADVICE)
+    shared = [Check("pairs", 1, 0, "agree"), Check("scale", 2, 1, "near")]
+    tried = [hypotheses.Tried(Hypothesis("started from a and b", sfm=None),
+                              Verdict(shared + [Check("silhouettes", 0.7, 0.6, "0.70"), lean])),
+             hypotheses.Tried(Hypothesis("photos' up", sfm=None),
+                              Verdict(shared + [outlines, level]))]
+    refusal = hypotheses.refusal(hypotheses.Choice(hypotheses.fallback(tried), tried))
+    assert "median agreement 0.57" in refusal and "lean" not in refusal
+
+
 def test_photos_all_turned_a_quarter_give_the_rings_up_and_one_spot_gives_none():
     # temple's photos are all turned 90 degrees: every right axis lies along up, so any
     # direction across it is "level" for them; their up axes, level, say which

@@ -7,7 +7,10 @@ photo's pitch (a photo turned a quarter, its EXIF lost, has its up axis horizont
 scene.cameras.photos_level). When those axes agree on one such direction (their rolls spread by
 a few degrees) the photos know where up is; a support plane far from it is a slope, a wall or a
 pedestal's side, and the object would lean in every frame. Photos at random rolls know nothing,
-and the check does not apply.
+and the check does not apply. Where up already is the photos' own level, it passes as it is:
+a hypothesis made to answer this check's failure (hypotheses.photos_up) then ranks beside the
+one it answered by its other checks, and a refusal reports what it failed instead of the lean
+it mended.
 """
 
 from __future__ import annotations
@@ -30,9 +33,12 @@ def angle(a: np.ndarray, b: np.ndarray) -> float:
 
 def check(hypothesis: Hypothesis) -> Check | None:
     found = hypothesis.found
-    if found is None or found.up_source != "plane":
-        return None  # up already comes from the photos or the cameras
+    if found is None or found.up_source not in ("plane", "photos"):
+        return None  # up comes from the phone's gravity or the cameras
     c2ws = np.stack([p.camera.c2w for p in found.photos])
+    if found.up_source == "photos":
+        return Check("upright", AGREE_DEG, 0.0, f"up is the photos' own level (their rolls "
+                     f"spread {photos_level(c2ws)[1]:.1f} deg)", ADVICE)
     theirs = agreed_level(c2ws)
     if theirs is None:
         return None

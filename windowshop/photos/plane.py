@@ -196,7 +196,7 @@ def level_up(isolated: Isolated, level: np.ndarray, points: np.ndarray,
     out of its box and cut its masks in two). A plane nearer the level stays the support, its
     fit tilted by few points."""
     found = isolated.plane
-    if found is not None and found.normal @ level < np.cos(np.radians(WALL_ANGLE)):
+    if found is not None and _stands_upright(found, level):
         return Isolated(plane=None, up=level, index=where_views_meet(points, cameras),
                         up_source="photos")
     return Isolated(plane=found, up=level, index=isolated.index, up_source="photos")
@@ -217,8 +217,13 @@ def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:
     mean_up = np.stack([c.c2w[:3, 1] for c in cameras]).mean(0)
     if np.linalg.norm(mean_up) < UPRIGHT_AGREE:
         return False
-    cosine = float(found.normal @ mean_up) / np.linalg.norm(mean_up)
-    return cosine < np.cos(np.radians(WALL_ANGLE))
+    return _stands_upright(found, mean_up / np.linalg.norm(mean_up))
+
+
+def _stands_upright(found: Plane, up: np.ndarray) -> bool:
+    """Whether `found`'s normal lies more than WALL_ANGLE degrees off the unit `up` (3,): a
+    wall or a side, no support."""
+    return float(found.normal @ up) < np.cos(np.radians(WALL_ANGLE))
 
 
 def where_views_meet(points: np.ndarray, cameras: list[Camera]) -> np.ndarray:

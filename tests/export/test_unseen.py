@@ -4,10 +4,10 @@ concavities a photo looked into kept open, coloured a neutral grey."""
 import numpy as np
 import pytest
 
-from windowshop.export.mesh import components, marching_cubes, open_edges
-from windowshop.export.unseen import (NEAR, RAMP, close_unseen, hull_occupancy,
-                                      neutral_colour, surface_visibility, unseen_weight,
-                                      weight_at)
+from windowshop.export.mesh import Mesh, components, marching_cubes, open_edges
+from windowshop.export.unseen import (COVER_MARGIN, NEAR, RAMP, close_unseen, held_to_covered,
+                                      hull_occupancy, neutral_colour, surface_visibility,
+                                      unseen_weight, weight_at)
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 
@@ -160,3 +160,38 @@ def test_a_hidden_surface_seen_edge_on_is_not_seen():
            & (points[:, 0] > -0.2) & (points[:, 0] < 0.0))
     assert top.sum() > 5
     assert visibility.seen[top].mean() < 0.05
+
+
+def ball_mesh() -> Mesh:
+    p = lattice()
+    return marching_cubes(np.where(np.linalg.norm(p, axis=-1) < 0.6, 2 * LEVEL, 0.0), LEVEL, AABB)
+
+
+def test_a_bulge_on_the_unseen_back_is_held_to_the_seen_part_s_hull():
+    """The ball photographed from the front, a bulge on its back (never photographed) drawn out
+    twice as far behind it, as a tuned closure may: the bulge is moved in to the hull of the
+    faces the photos see plus the margin, toward the middle; the photographed front stays put."""
+    ball = ball_mesh()
+    vertices = ball.vertices.copy()
+    back = vertices[:, 0] < -0.45
+    vertices[back, 0] *= 2.0
+    held = held_to_covered(Mesh(vertices, ball.faces), front_cameras(), AABB)
+    # the three cameras (60 degrees apart) see the surface up to cos 0.15 off it: their rim
+    # lies at x = 0.6 cos(30 + 81.4 degrees) = -0.22, and the back may reach the margin past it
+    grow = COVER_MARGIN * float(np.linalg.norm(AABB[1] - AABB[0]))
+    assert vertices[:, 0].min() < -1.1
+    assert held.vertices[:, 0].min() > 0.6 * np.cos(np.radians(30 + 81.4)) - grow - 0.03
+    moved = np.linalg.norm(held.vertices - vertices, axis=1) > 0
+    facing = (vertices[:, 0] > 0.3) & (np.abs(vertices[:, 2]) < 0.3)  # what the cameras face
+    assert moved[back].all() and not moved[facing].any()
+    assert (np.linalg.norm(held.vertices, axis=1) < np.linalg.norm(vertices, axis=1))[moved].all()
+
+
+def test_a_surface_seen_all_round_is_not_moved():
+    ball = ball_mesh()
+    cameras = [Camera(fx=120, fy=120, cx=60, cy=60, width=120, height=120,
+                      c2w=look_at(3 * np.array(d, dtype=float), np.zeros(3),
+                                  np.array([0.0, 1.0, 0.0]) if abs(d[2]) else np.array([0.0, 0.0, 1.0])))
+               for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
+    held = held_to_covered(ball, cameras, AABB)
+    assert np.array_equal(held.vertices, ball.vertices)

@@ -12,7 +12,8 @@
                       -> UVs and the base colour baked from the photos, the field's where no
                          bake photo sees the surface, grey on the side none saw (texture, photos)
                       -> moved again to match all the photos and their masks (tune), then
-                         smoothed (mesh.taubin: the tune roughens it)
+                         smoothed (mesh.taubin: the tune roughens it), and held within the
+                         hull of the faces the photos see (unseen.held_to_covered)
                       -> that texture refined by least squares against all the photos (refine)
                       -> the model frame: +Y up, standing at the origin (frame.model_frame),
                          and the orbit a viewer may take: the covered arc (orbit)
@@ -72,7 +73,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.mesh import (Mesh, lattice_resolution, neighbour_angles, object_mesh,
                                         sample_volume, taubin, vertex_normals)
     from windowshop.export.support import flatten_base, plane_found, prepared_report
-    from windowshop.export.unseen import weight_at
+    from windowshop.export.unseen import held_to_covered, weight_at
     from windowshop.export.orbit import covered_orbit
     from windowshop.export.photos import training_photos
     from windowshop.export.refine import refine_texture
@@ -138,6 +139,10 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
                 mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
             unwrapped = tex.moved(unwrapped, mesh)
             lap("tune")
+        if options.close_unseen:
+            mesh = held_to_covered(mesh, run.train_cameras, aabb)
+            unwrapped = tex.moved(unwrapped, mesh)
+            lap("hold")
         if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
                                    every_photo, estimated=estimated)
@@ -147,6 +152,9 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         vertices, faces, normals, uv = (unwrapped.vertices, unwrapped.faces, unwrapped.normals,
                                         unwrapped.uv)
     else:
+        if options.close_unseen:
+            mesh = held_to_covered(mesh, run.train_cameras, aabb)
+            lap("hold")
         surface, normals = mesh, vertex_normals(mesh)
         vertices, faces = mesh.vertices, mesh.faces
     frame = model_frame(mesh.vertices, run.transform, options.size_cm)

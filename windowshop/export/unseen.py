@@ -24,6 +24,7 @@ import torch
 import torch.nn.functional as F
 from scipy import ndimage
 
+from windowshop.export.mesh import Mesh
 from windowshop.export.photos import splat_depth
 from windowshop.export.raster import screen
 from windowshop.scene.types import Camera
@@ -52,6 +53,7 @@ SMOOTH = 2.0  # cells: the Gaussian's sigma that rounds the hull's edges
 HULL_POINTS = 5_000  # seen points the convex hull is taken of, at most (a random subset)
 HULL_STRIDE = 4  # the hull's occupancy is tested on every HULL_STRIDE-th lattice vertex at most,
 HULL_CELLS = 64  # keeping at least this many along the lattice's longest side
+COVER_MARGIN = 0.02  # of the box's diagonal: how far past the seen faces' hull the model may reach
 
 
 @dataclass
@@ -104,32 +106,42 @@ def surface_visibility(occupied: np.ndarray, aabb: np.ndarray, cameras: list[Cam
     grad = np.stack([ndimage.sobel(blur, axis=k)[tuple(index.T)] for k in range(3)], -1)
     normals = -grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
     cell = stride * float((aabb[1] - aabb[0]).max()) / max(max(occupied.shape) - 1, 1)
+    seen, views = seen_by(points, normals, cameras, cell, side, (aabb[0] + aabb[1]) / 2)
+    return Visibility(points=points, index=index, seen=seen, stride=stride, cell=cell,
+                      views=views, kept=kept)
+
+
+def seen_by(points: np.ndarray, normals: np.ndarray, cameras: list[Camera], spacing: float,
+            side: int, centre: np.ndarray) -> tuple[np.ndarray, list[tuple[Camera, torch.Tensor]]]:
+    """((S,) bool: which surface `points` (S, 3) with outward `normals` (S, 3), about `spacing`
+    apart, some camera of `cameras` sees; each camera made small and its depth buffer). A point
+    is seen when it faces the camera, projects into its photo and is at most TOLERANCE spacings
+    (plus what the slope allows) behind the nearest point in its pixel's 3x3; `centre` is the
+    object's, whose distance sizes the small cameras."""
     p = torch.as_tensor(points, dtype=torch.float32)
     n = torch.as_tensor(normals, dtype=torch.float32)
     seen = torch.zeros(len(p), dtype=torch.bool)
-    centre_of_box = (aabb[0] + aabb[1]) / 2
     views = []
     for camera in cameras:
         # small enough that neighbouring surface points fall at most a pixel apart (the depth
         # buffer's 3x3 neighbourhood then has no holes to see through), at most `side` pixels
-        distance = float(np.linalg.norm(camera.c2w[:3, 3] - centre_of_box))
-        scale = min(side / max(camera.width, camera.height), distance / (cell * camera.fx))
+        distance = float(np.linalg.norm(camera.c2w[:3, 3] - centre))
+        scale = min(side / max(camera.width, camera.height), distance / (spacing * camera.fx))
         small = camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
         xy, z = screen(p, small)
         depth = splat_depth(xy, z, small)
         views.append((small, depth))
-        centre = torch.as_tensor(small.c2w[:3, 3], dtype=torch.float32)
-        cos = (n * F.normalize(centre - p, dim=-1)).sum(-1)
+        eye = torch.as_tensor(small.c2w[:3, 3], dtype=torch.float32)
+        cos = (n * F.normalize(eye - p, dim=-1)).sum(-1)
         px = torch.floor(xy).long()
         inside = ((px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] < small.width)
                   & (px[:, 1] < small.height) & (z > 0) & (cos > MIN_COS))
         k = inside.nonzero()[:, 0]
         c = cos[k]
         slope = 2 * z[k] / small.fx * torch.sqrt(1 - c * c) / c
-        slack = TOLERANCE * cell + torch.clamp(slope, max=SLOPE_CELLS * cell)
+        slack = TOLERANCE * spacing + torch.clamp(slope, max=SLOPE_CELLS * spacing)
         seen[k[z[k] <= depth[px[k, 1], px[k, 0]] + slack]] = True
-    return Visibility(points=points, index=index, seen=seen.numpy(), stride=stride, cell=cell,
-                      views=views, kept=kept)
+    return seen.numpy(), views
 
 
 def seen_empty(visibility: Visibility, points: torch.Tensor) -> torch.Tensor:
@@ -227,6 +239,42 @@ def close_unseen(volume: np.ndarray, level: float, weight: np.ndarray,
     blended = w.neg().add_(1.0).mul_(field).add_(w * t)  # (1 - w) field + w target
     out = (level * blended).div_(blended.neg_().add_(1.0).clamp_(min=1e-6))
     return torch.where(w > 0, out, v).numpy().astype(volume.dtype, copy=False)
+
+
+def held_to_covered(mesh: Mesh, cameras: list[Camera], aabb: np.ndarray,
+                    margin: float = COVER_MARGIN, side: int = SIDE) -> Mesh:
+    """`mesh` with every vertex beyond the region the `cameras` cover (the convex hull of the
+    faces they see, seen_by, its corners grown by `margin` of `aabb`'s diagonal away from its
+    centre) moved back onto that region's boundary along the line to its centre: the closure,
+    tuned and smoothed after the hull was drawn, cannot bulge out past what the photos show."""
+    from scipy.spatial import ConvexHull, Delaunay, QhullError
+
+    tri = mesh.vertices[mesh.faces]
+    centres = tri.mean(1)
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    spacing = float(np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1).mean())
+    seen, _ = seen_by(centres, normals, cameras, spacing, side, centres.mean(0))
+    try:
+        corners = centres[seen][ConvexHull(centres[seen]).vertices]
+    except (QhullError, ValueError):
+        return mesh  # too little seen to say what the photos cover
+    middle = corners.mean(0)
+    out = corners - middle
+    grow = margin * float(np.linalg.norm(aabb[1] - aabb[0]))
+    corners = corners + grow * out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+    planes = ConvexHull(corners).equations  # n . x + d <= 0 inside
+    # only the vertices outside (few) against every plane: all of them would be (V, P) floats
+    far = np.flatnonzero(Delaunay(corners).find_simplex(mesh.vertices) < 0)
+    # the largest t <= 1 with middle + t (x - middle) inside every plane: n . (x - middle) t
+    # <= room, the plane's distance from the middle (> 0), so t = 1 / max(1, max n . ray / room)
+    scaled = planes[:, :3] / -(middle @ planes[:, :3].T + planes[:, 3])[:, None]
+    vertices = mesh.vertices.copy()
+    for first in range(0, len(far), 1024):
+        ray = vertices[far[first:first + 1024]] - middle
+        t = 1.0 / np.maximum((ray @ scaled.T).max(1), 1.0)
+        vertices[far[first:first + 1024]] = middle + t[:, None] * ray
+    return Mesh(vertices, mesh.faces)
 
 
 def weight_at(weight: np.ndarray, aabb: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -187,6 +187,32 @@ def test_right_photos_of_one_side_only_cohere_though_their_hull_is_deep():
     assert np.median(wrong) < silhouettes.PASS_COVERED and wrong.argmin() == 2
 
 
+def _silhouettes_of(cameras: list[Camera], masks: list[np.ndarray], aabb: np.ndarray) -> Check:
+    from windowshop.photos.located import Located
+    from windowshop.photos.output import PosedPhoto
+
+    photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", c, {}) for k, c in enumerate(cameras)]
+    found = Located(photos=photos, transform=np.eye(4), aabb=aabb, points=np.zeros((0, 3)),
+                    masks={}, mask_kind="segmented", background="", plane=None,
+                    raw_masks={f"p{k}": m for k, m in enumerate(masks)})
+    return silhouettes.check(Hypothesis("as mapped", sfm=None, found=found))
+
+
+def test_four_photos_must_fit_their_hull_and_five_need_only_be_covered():
+    """Under FIT_VIEWS photos each is checked against the hull of three, which covers a mask
+    wherever they stand: the four one-sided photos, right but with a loose hull, fail; the same
+    walk with a fifth photo passes on coverage alone."""
+    lo, hi = np.array([-0.5, -0.3, -0.6]), np.array([0.5, 0.3, 0.6])
+    aabb = np.stack([lo * [2.5, 2.5, 1.0], hi * 2.5])
+    ring = _ring(24, np.array([0, 0, 1.0]))
+    masks = _box_masks(ring[:5], lo, hi)
+    four = _silhouettes_of(ring[:4], masks[:4], aabb)
+    assert four.score > silhouettes.PASS_COVERED and not four.passed
+    assert "median IoU" in four.detail
+    five = _silhouettes_of(ring[:5], masks, aabb)
+    assert five.passed and "IoU" not in five.detail
+
+
 def test_a_photo_placed_far_from_where_its_outline_says_is_blamed_for_its_scale():
     from windowshop.photos.located import Located
     from windowshop.photos.output import PosedPhoto
@@ -270,7 +296,7 @@ def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
     assert level.passed and "photos' own level" in level.detail
     lean = Check("upright", -70.0, 0.0, "the support plane's up is 81.8 deg from the photos' own",
                  upright.ADVICE)
-    outlines = Check("silhouettes", 0.57, silhouettes.PASS_COVERED, "median agreement 0.57",
+    outlines = Check("silhouettes", 0.57, silhouettes.PASS_COVERED, "median share covered 0.57",
                      silhouettes.ADVICE)
     shared = [Check("pairs", 1, 0, "agree"), Check("scale", 2, 1, "near")]
     tried = [hypotheses.Tried(Hypothesis("started from a and b", sfm=None),
@@ -278,7 +304,7 @@ def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
              hypotheses.Tried(Hypothesis("photos' up", sfm=None),
                               Verdict(shared + [outlines, level]))]
     refusal = hypotheses.refusal(hypotheses.Choice(hypotheses.fallback(tried), tried))
-    assert "median agreement 0.57" in refusal and "lean" not in refusal
+    assert "median share covered 0.57" in refusal and "lean" not in refusal
 
 
 def test_photos_all_turned_a_quarter_give_the_rings_up_and_one_spot_gives_none():

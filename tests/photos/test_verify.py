@@ -200,17 +200,19 @@ def _silhouettes_of(cameras: list[Camera], masks: list[np.ndarray], aabb: np.nda
 
 def test_four_photos_must_fit_their_hull_and_five_need_only_be_covered():
     """Under FIT_VIEWS photos each is checked against the hull of three, which covers a mask
-    wherever they stand: the four one-sided photos, right but with a loose hull, fail; the same
-    walk with a fifth photo passes on coverage alone."""
+    wherever they stand, so only the fit counts: the four one-sided photos, right but with a
+    loose hull, fail; the same walk with a fifth photo passes by its coverage, its fit as poor."""
     lo, hi = np.array([-0.5, -0.3, -0.6]), np.array([0.5, 0.3, 0.6])
-    aabb = np.stack([lo * [2.5, 2.5, 1.0], hi * 2.5])
+    aabb = np.stack([lo * [3.0, 3.0, 1.0], hi * 3.0])  # loose: the fit of five under 0.6
     ring = _ring(24, np.array([0, 0, 1.0]))
     masks = _box_masks(ring[:5], lo, hi)
     four = _silhouettes_of(ring[:4], masks[:4], aabb)
     assert four.score > silhouettes.PASS_COVERED and not four.passed
-    assert "median IoU" in four.detail
+    assert "only the fit counts" in four.detail
     five = _silhouettes_of(ring[:5], masks, aabb)
-    assert five.passed and "IoU" not in five.detail
+    assert five.passed and "only the fit counts" not in five.detail
+    assert np.median(silhouettes.fit(silhouettes.hulls_of_others(masks, ring[:5], aabb),
+                                     masks)) < silhouettes.PASS_FIT  # passed by its coverage
 
 
 def test_a_photo_placed_far_from_where_its_outline_says_is_blamed_for_its_scale():

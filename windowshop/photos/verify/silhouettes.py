@@ -28,7 +28,7 @@ from windowshop.scene.types import Camera
 GRID = 48  # voxels per side of the object's box
 TOLERANCE = 0.15  # a voxel survives this share of the other views missing it (imperfect masks)
 MIN_VIEWS = 4  # fewer masked photos: no hull to speak of
-# the photos' median fit or share covered must reach these (bench/RESULTS.md, stop 46: over 75
+# the photos' median fit or share covered must reach these (bench/RESULTS.md, stop 46: over 63
 # right hypotheses of the shared and rendered captures, 6 to 78 photos, all round or one side,
 # one or the other always did (fit 0.43-0.86, covered 0.67-1.00); misplaced ones fit 0.00 and
 # 0.51, covered 0.00 and 0.62; the folded boxes cohere, as a symmetric object's fold does, and

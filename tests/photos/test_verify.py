@@ -147,6 +147,11 @@ def _box_masks(cameras: list[Camera], lo: np.ndarray, hi: np.ndarray) -> list[np
     return masks
 
 
+def _coherence(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray) -> np.ndarray:
+    """The share of each mask the hull of the others covers."""
+    return silhouettes.covered(silhouettes.hulls_of_others(masks, cameras, aabb), masks)
+
+
 def _moved(cameras: list[Camera], k: int, degrees: float) -> list[Camera]:
     """`cameras` with the k-th turned `degrees` to the side: the box lands off its mask."""
     c2w = cameras[k].c2w.copy()
@@ -159,10 +164,10 @@ def test_silhouettes_of_right_poses_cohere_and_a_moved_camera_does_not():
     cameras = _ring(10, np.array([0, 0, 1.0]))
     masks = _box_masks(cameras, lo, hi)
     aabb = np.stack([lo * [1.3, 1.3, 1.0], hi * 1.3])  # its floor on the support, as prepare's
-    scores = silhouettes.coherence(masks, cameras, aabb)
+    scores = _coherence(masks, cameras, aabb)
     assert scores.min() > 0.95  # the others' hull holds the box, so it covers each mask
     # turned 12 degrees, the box lands a third of its width off: 0.30 of its mask covered
-    wrong = silhouettes.coherence(masks, _moved(cameras, 3, 12.0), aabb)
+    wrong = _coherence(masks, _moved(cameras, 3, 12.0), aabb)
     assert wrong[3] < silhouettes.SUSPECT_COVERED < scores[3]
     assert np.median(wrong) > silhouettes.PASS_COVERED  # the others keep their agreement
 
@@ -178,12 +183,12 @@ def test_right_photos_of_one_side_only_cohere_though_their_hull_is_deep():
     cameras = _ring(24, np.array([0, 0, 1.0]))[:4]
     masks = _box_masks(cameras, lo, hi)
     aabb = np.stack([lo * [2.5, 2.5, 1.0], hi * 2.5])
-    scores = silhouettes.coherence(masks, cameras, aabb)
+    scores = _coherence(masks, cameras, aabb)
     assert scores.min() > 0.95
     hulls = silhouettes.hulls_of_others(masks, cameras, aabb)
     iou = [np.count_nonzero(h & m) / np.count_nonzero(h | m) for h, m in zip(hulls, masks)]
     assert np.median(iou) < 0.6
-    wrong = silhouettes.coherence(masks, _moved(cameras, 2, 12.0), aabb)
+    wrong = _coherence(masks, _moved(cameras, 2, 12.0), aabb)
     assert np.median(wrong) < silhouettes.PASS_COVERED and wrong.argmin() == 2
 
 

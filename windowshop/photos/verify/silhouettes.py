@@ -55,20 +55,14 @@ def hulls_of_others(masks: list[np.ndarray], cameras: list[Camera], aabb: np.nda
     # (in the photo's frame, on its mask) per voxel, at the masks' full size
     seen = [projection(points, c, m, max(m.shape)) for c, m in zip(cameras, masks)]
     frames = np.sum([s[0] for s in seen], axis=0)
-    covered = np.sum([s[1] for s in seen], axis=0)
+    on_masks = np.sum([s[1] for s in seen], axis=0)
     hulls = []
     for (inside, mine), camera in zip(seen, cameras):
         others = frames - inside
-        missed = (others - (covered - mine))  # other views that see background there
+        missed = (others - (on_masks - mine))  # other views that see background there
         keep = (others >= 2) & (missed <= TOLERANCE * others)
         hulls.append(hull_silhouette(points[keep], voxel, camera))
     return hulls
-
-
-def coherence(masks: list[np.ndarray], cameras: list[Camera], aabb: np.ndarray) -> np.ndarray:
-    """(N,) the share of each mask (H, W) bool that the hull of the other masks, projected into
-    its camera, covers (hulls_of_others)."""
-    return covered(hulls_of_others(masks, cameras, aabb), masks)
 
 
 def covered(hulls: list[np.ndarray], masks: list[np.ndarray]) -> np.ndarray:

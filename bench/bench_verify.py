@@ -2,7 +2,8 @@
 JSON, one line per case as it finishes and a table at the end.
 
     python bench/bench_verify.py [--sets dtu_skull,temple] [--no-full | --no-subsets]
-        [--count 8] [--offsets 3] [--only SUBSTRING] [--extra NAME=PATH ...]
+        [--count 8] [--offsets 3] [--arcs COUNT:DEGREES ...] [--only SUBSTRING]
+        [--extra NAME=PATH ...]
         [--prepare KEY=VALUE ...] [--sensors] [--out results.json]
 
 Cases: each shared capture with all its photos ("<capture>/full"), and `--offsets` subsets of
@@ -16,6 +17,12 @@ photos but scores, and draws subsets from, only the frames whose published pose 
 fold, are scored against beer_can/full as this run delivered it, when that is right (run first). `--extra NAME=PATH` adds a capture from a folder with images/ and a
 ground-truth transforms.json (nerfstudio, OpenGL camera-to-world; a frame's file_path stem is its
 photo's stem).
+
+`--arcs 8:100 6:60 ...` adds captures shot from one side only, the brief's usual case: for each
+capture with published poses, COUNT photos spread over DEGREES of its walk, from three start
+azimuths ("<capture>/arc100x8@120", arc_cases). A hull carved from one side is barely carved
+in depth, and focal length and depth trade off over a narrow arc: cases the all-round subsets
+do not pose.
 
 Each case runs the real windowshop.photos.prepare.prepare (PrepareOptions() defaults, overridden
 by `--prepare KEY=VALUE`, the value read as JSON when it parses, else as text) on a temporary
@@ -90,6 +97,7 @@ from windowshop.scene.cameras import up_vector
 
 RIGHT_DEG = 5.0  # a delivered scene is right when the median relative rotation error is at most
 RIGHT_SHARE = 0.9  # this, and at least this share of its scored photos are correct
+ARC_STARTS = (0.0, 120.0, 240.0)  # --arcs: the azimuths each one-sided case starts from
 OUTCOMES = ("right", "refused", "wrong-delivered", "delivered-unscored", "error")
 
 
@@ -257,6 +265,36 @@ def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int)
     return out
 
 
+def arc_cases(capture: Capture, count: int, arc: float, starts: tuple[float, ...] = ARC_STARTS
+              ) -> list[Case]:
+    """One side only: for each start azimuth, `count` photos spread over `arc` degrees of the
+    capture's published cameras (azimuth about the normal of their best-fit plane, 0 at its
+    first principal axis), each the photo nearest its target azimuth (none where the nearest
+    unused photo lies more than two of the capture's mean steps plus 5 degrees off: a gap in the
+    walk), as "<capture>/arc<arc>x<count>@<start>"; only photos with trustworthy poses."""
+    pool = [p for p, c in capture.truth.items()
+            if c is not None and (capture.scored is None or capture.scored(p))]
+    if len(pool) < count:
+        return []
+    rel = np.stack([capture.truth[p][:3, 3] for p in pool])
+    rel = rel - rel.mean(0)
+    basis = np.linalg.svd(rel, full_matrices=False)[2][:2]
+    azimuth = np.degrees(np.arctan2(rel @ basis[1], rel @ basis[0]))
+    reach = 2 * 360 / len(pool) + 5
+    out = []
+    for start in starts:
+        chosen: list[int] = []
+        for target in np.linspace(start, start + arc, count):
+            off = np.abs((azimuth - target + 180) % 360 - 180)
+            off[chosen] = np.inf
+            if off.min() < reach:
+                chosen.append(int(np.argmin(off)))
+        photos = sorted(pool[i] for i in set(chosen))
+        out.append(Case(f"{capture.name}/arc{arc:g}x{count}@{start:g}", capture.name, photos,
+                        {p.stem: capture.truth[p] for p in photos}, capture.up))
+    return out
+
+
 def up_error(recovered: dict[str, np.ndarray], truth: dict[str, np.ndarray], right: set[str],
              up: np.ndarray) -> float | None:
     """Degrees between the delivered up (+z of prepare's normalised frame, where `recovered`'s
@@ -408,6 +446,15 @@ def options_from(pairs: list[str]) -> PrepareOptions:
     return PrepareOptions(**overrides)
 
 
+def _arc(spec: str) -> tuple[int, float]:
+    """--arcs COUNT:DEGREES as (count, degrees)."""
+    count, sep, degrees = spec.partition(":")
+    try:
+        return int(count), float(degrees)
+    except ValueError:
+        raise SystemExit(f"--arcs {spec}: give COUNT:DEGREES, e.g. 8:100") from None
+
+
 def worktree() -> list[str]:
     """`git status --short` of the checkout: the changes beyond the commit that ran."""
     try:
@@ -456,6 +503,9 @@ def main() -> None:
                         help="run each capture's subsets of --count photos")
     parser.add_argument("--count", type=int, default=8, help="photos in a subset")
     parser.add_argument("--offsets", type=int, default=3, help="subsets per capture")
+    parser.add_argument("--arcs", nargs="*", default=[], metavar="COUNT:DEGREES",
+                        help="also one side only: COUNT photos over DEGREES of each capture's "
+                             "walk, from three starts (arc_cases), e.g. 8:100 6:60")
     parser.add_argument("--only", default=None, help="run only cases whose name holds this")
     parser.add_argument("--prepare", action="append", default=[], metavar="KEY=VALUE",
                         help="PrepareOptions override, e.g. masks=false")
@@ -477,6 +527,8 @@ def main() -> None:
         captures.append(extra_capture(name, Path(path)))
     todo = [c for capture in captures
             for c in cases(capture, args.full, args.subsets, args.count, args.offsets)]
+    todo += [c for spec in args.arcs for capture in captures
+             for c in arc_cases(capture, *_arc(spec))]
     referenced = {c.reference for c in todo if args.only is None or args.only in c.name}
     # the quick subsets first, after any full case that scores them
     todo = sorted((c for c in todo if args.only is None or args.only in c.name

@@ -35,13 +35,17 @@ PASS_SHARE = 0.93
 # a fold's seam photos agree with as many pairs as they contradict)
 BLAME_CONFLICTS = 2
 BLAME_RATIO = 2
-# ... or when MIN_MIRRORED strong pairs are turned round by more than MIRROR_DEG: two photos that
-# share a hundred matches and yet face each other are a side taken for its opposite. Of an
-# object whose opposite sides look alike every model has them (the folded box 43 and the
-# global mapper's 15; the right one would have its like-looking pairs); no right model of the
-# shared captures has one (their worst conflict: kermit's 130 degrees)
+# ... or when a strong pair is turned round by more than MIRROR_DEG: two photos that share a
+# hundred matches and yet face each other are a side taken for its opposite. Of an object whose
+# opposite sides look alike every model has them (the folded box 43 and the global mapper's 15;
+# the right one its like-looking pairs: doppelganger/arc150x12@240, 2); no right model of any
+# other capture has one (their worst conflict: kermit's 130 degrees; of the 328 right models in
+# the bench_verify runs kept since stop 34, only that box's has one). One is enough (stop 47):
+# 12 photos of the box over 150 degrees (doppelganger/arc150x12@0) folded 4 photos beyond
+# box_014, whose strong pairs said so at 177-178 degrees; left out as a suspect, it left one
+# such pair across the fold, 176 degrees, and the fold was delivered
 MIRROR_DEG = 150.0
-MIN_MIRRORED = 3
+MIN_MIRRORED = 1
 ALIKE = ("the object's sides look alike, so photos of one side were taken for the other: add "
          "photos that show a corner and two sides at once, and something that tells the sides "
          "apart (a label, a patterned cloth under the object)")

@@ -26,6 +26,7 @@ vertex on the figure, one value on the table), from the fixed light `LIGHT`.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -285,16 +286,19 @@ def box_cameras(count: int = 40, size: tuple[int, int] = (640, 480), seed: int =
 
 
 def doppelganger_box(out: str | Path, count: int = 40, size: tuple[int, int] = (640, 480),
-                     seed: int = 0) -> Path:
-    """The doppelganger carton on pure white, `count` photos of `size` (w, h) all round; returns
-    `out` (images/, masks/, transforms.json)."""
+                     seed: int = 0, only: Sequence[int] | None = None) -> Path:
+    """The doppelganger carton on pure white, `count` photos of `size` (w, h) all round (only
+    those at the ring's indices `only` when given, named by them); returns `out` (images/,
+    masks/, transforms.json)."""
     box = carton(seed)
-    images, masks, cams = [], [], box_cameras(count, size, seed)
+    ring = box_cameras(count, size, seed)
+    picked = range(count) if only is None else only
+    images, masks, cams = [], [], [ring[k] for k in picked]
     for cam in cams:
         rgb, cover, _ = render_carton(box, cam)
         images.append(_to_uint8(rgb))
         masks.append(cover >= 0.5)
-    return write_capture(out, cams, images, masks, [f"box_{k:03d}" for k in range(count)])
+    return write_capture(out, cams, images, masks, [f"box_{k:03d}" for k in picked])
 
 
 # ----------------------------------------------------------------------------- figure on granite

@@ -144,13 +144,19 @@ def _all(reader) -> dict[Path, np.ndarray | None]:
         fewphoto._pick = pick
 
 
+def walk_azimuth(centres: np.ndarray) -> np.ndarray:
+    """(N,) radians of each camera centre (N, 3) about the normal of their best-fit plane, 0 at
+    its first principal axis."""
+    rel = centres - centres.mean(0)
+    basis = np.linalg.svd(rel, full_matrices=False)[2][:2]
+    return np.arctan2(rel @ basis[1], rel @ basis[0])
+
+
 def spread_from(centres: np.ndarray, count: int, offset: int, of: int) -> list[int]:
     """bench_fewphoto.spread, the farthest-point sampling started at the photo nearest
     offset / of of the subset's spacing (360 / count degrees) beyond the least azimuth
     (offset 0: spread itself)."""
-    rel = centres - centres.mean(0)
-    basis = np.linalg.svd(rel, full_matrices=False)[2][:2]
-    azimuth = np.arctan2(rel @ basis[1], rel @ basis[0])
+    azimuth = walk_azimuth(centres)
     first = int(np.argmin(azimuth))
     target = azimuth[first] + offset * 2 * np.pi / count / of
     first = int(np.argmin(np.abs(np.angle(np.exp(1j * (azimuth - target))))))
@@ -268,18 +274,15 @@ def cases(capture: Capture, full: bool, subsets: bool, count: int, offsets: int)
 def arc_cases(capture: Capture, count: int, arc: float, starts: tuple[float, ...] = ARC_STARTS
               ) -> list[Case]:
     """One side only: for each start azimuth, `count` photos spread over `arc` degrees of the
-    capture's published cameras (azimuth about the normal of their best-fit plane, 0 at its
-    first principal axis), each the photo nearest its target azimuth (none where the nearest
-    unused photo lies more than two of the capture's mean steps plus 5 degrees off: a gap in the
-    walk), as "<capture>/arc<arc>x<count>@<start>"; only photos with trustworthy poses."""
+    capture's published cameras (walk_azimuth), each the photo nearest its target azimuth (none
+    where the nearest unused photo lies more than two of the capture's mean steps plus 5 degrees
+    off: a gap in the walk), as "<capture>/arc<arc>x<count>@<start>"; only photos with
+    trustworthy poses."""
     pool = [p for p, c in capture.truth.items()
             if c is not None and (capture.scored is None or capture.scored(p))]
     if len(pool) < count:
         return []
-    rel = np.stack([capture.truth[p][:3, 3] for p in pool])
-    rel = rel - rel.mean(0)
-    basis = np.linalg.svd(rel, full_matrices=False)[2][:2]
-    azimuth = np.degrees(np.arctan2(rel @ basis[1], rel @ basis[0]))
+    azimuth = np.degrees(walk_azimuth(np.stack([capture.truth[p][:3, 3] for p in pool])))
     reach = 2 * 360 / len(pool) + 5
     out = []
     for start in starts:

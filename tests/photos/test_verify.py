@@ -287,18 +287,22 @@ def test_a_refusal_reports_the_failure_of_the_latest_of_equally_ranked_hypothese
     assert hypotheses.fallback(better) is better[1]  # as many failed, more checks made
 
 
-def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
-    """The photos' up answers a failed upright check (temple/8@0: a plane 82 degrees off the
-    photos' level); when it then fails its silhouettes, the refusal says so, not the lean."""
+def _located(cameras: list[Camera], up_source: str) -> Hypothesis:
+    """A hypothesis whose object was found with `up_source`, its photos at `cameras`."""
     from windowshop.photos.located import Located
     from windowshop.photos.output import PosedPhoto
 
-    cameras = _ring(8, np.array([0, 0, 1.0]))
     photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", c, {}) for k, c in enumerate(cameras)]
     found = Located(photos=photos, transform=np.eye(4), aabb=np.array([[-1.0] * 3, [1.0] * 3]),
                     points=np.zeros((0, 3)), masks={}, mask_kind="segmented", background="",
-                    plane=None, up_source="photos")
-    level = upright.check(Hypothesis("photos' up", sfm=None, found=found))
+                    plane=None, up_source=up_source)
+    return Hypothesis("as mapped", sfm=None, found=found)
+
+
+def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
+    """The photos' up answers a failed upright check (temple/8@0: a plane 82 degrees off the
+    photos' level); when it then fails its silhouettes, the refusal says so, not the lean."""
+    level = upright.check(_located(_ring(8, np.array([0, 0, 1.0])), "photos"))
     assert level.passed and "photos' own level" in level.detail
     lean = Check("upright", -70.0, 0.0, "the support plane's up is 81.8 deg from the photos' own",
                  upright.ADVICE)
@@ -311,6 +315,25 @@ def test_a_lean_mended_by_the_photos_up_is_not_what_a_refusal_reports():
                               Verdict(shared + [outlines, level]))]
     refusal = hypotheses.refusal(hypotheses.Choice(hypotheses.fallback(tried), tried))
     assert "median share covered 0.57" in refusal and "lean" not in refusal
+
+
+def test_an_up_from_the_cameras_needs_photos_upright_about_it():
+    """No support plane and no level the photos agree on: up is the cameras' mean. Photos held
+    upright with a hand's tilt (random rolls of +-40 degrees) pass; photos turned by quarters
+    about it (as fruit's photos, their orientation lost, in a model too wrong for their level
+    to agree) fail, since the object would lie on its side, and no photos' up is tried."""
+    rng = np.random.default_rng(3)
+    up = np.array([0.0, 0.0, 1.0])
+    tilted = upright.check(_located(_ring(8, up, rng.uniform(-40, 40, 8)), "cameras"))
+    assert tilted.passed and "0 of 8 photos" in tilted.detail
+    quarters = 90.0 * np.array([0, 1, 2, 3, 0, 1, 0, 0]) + rng.uniform(-10, 10, 8)
+    hypothesis = _located(_ring(8, up, quarters), "cameras")
+    turned = upright.check(hypothesis)
+    assert not turned.passed and "4 of 8 photos" in turned.detail
+    assert "turned different ways" in turned.advice
+    assert hypotheses.photos_up(None, hypothesis, Verdict([turned])) is None
+    # up from the level the photos agree on is not held to their rolls about it
+    assert upright.check(_located(_ring(8, up, quarters), "photos")).passed
 
 
 def test_photos_all_turned_a_quarter_give_the_rings_up_and_one_spot_gives_none():

@@ -114,7 +114,9 @@ def _timed(hypothesis: Hypothesis) -> Verdict:
 
 
 def photos_up(search: Search, best: Hypothesis, verdict: Verdict) -> Hypothesis | None:
-    if not any(c.name == "upright" for c in verdict.failed):
+    """The plane's up failed against the photos' level: up from that level. (Up from the
+    cameras fails only where the photos agree on no level: nothing to try.)"""
+    if not any(c.name == "upright" for c in verdict.failed) or best.found.up_source == "cameras":
         return None
     return Hypothesis(f"photos' up ({best.label})", best.sfm, up="photos",
                       by_points=best.by_points)

@@ -36,6 +36,7 @@ from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
 from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
+from windowshop.photos.verify.silhouettes import FIT_VIEWS
 from windowshop.rays import project
 from windowshop.scene import normalize
 from windowshop.scene.cameras import agreed_level, nearest_point_to_axes
@@ -43,7 +44,7 @@ from windowshop.scene.nerfstudio import WRITER_KEY
 
 SEARCH_GROW = 0.3  # masks are sought in the points' box grown by this share of its size ...
 BACKGROUND_GROW = 0.2  # ... and sparse points this share of the box size outside that are not it
-MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3): prepare fails
+MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3, or FIT_VIEWS): fails
 # Share of the "prepare" progress each stage covers (retries add time but no progress).
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
           "matching": 0.2, "placing cameras": 0.25, "finding and checking the object": 0.05,
@@ -143,12 +144,16 @@ def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
                f"with detail around it")
     if count - len(poor) < 3:
         raise UserError(texture)
-    if len(sfm.placed) >= max(3, math.ceil(MIN_PLACED_SHARE * count)):
+    # below FIT_VIEWS the verifier's outlines cannot tell a right model from a wrong one (the
+    # hull of three covers any mask: right 4-photo models fit 0.51-0.94, wrong ones 0.07-0.84)
+    need = max(3, min(count, FIT_VIEWS), math.ceil(MIN_PLACED_SHARE * count))
+    if len(sfm.placed) >= need:
         return
     missing = sorted(sfm.unplaced + sfm.guessed)  # posed by the ring alone is not enough
     names = ", ".join(shown[n] for n in missing[:20])
     names += " ..." if len(missing) > 20 else ""
-    raise UserError(f"could only place {len(sfm.placed)} of {count} photos; not placed: {names}. "
+    raise UserError(f"could only place {len(sfm.placed)} of {count} photos ({need} are needed to "
+                    f"check the model); not placed: {names}. "
                     f"Take more photos with overlap: walk around the object in small steps "
                     f"(10-15 degrees) so that each photo shares most of its view with the next"
                     + (f". Also, {texture}" if len(poor) > count // 4 else ""))

@@ -10,7 +10,8 @@ no masks to compare) in a module of its own:
     silhouettes  each mask against the visual hull the *other* views carve (silhouette
                  coherence, Hernandez et al. 2007): a wrong pose carves the object away
     upright      the support plane's normal against the photos' own up (photos are taken
-                 level, so their right axes are horizontal)
+                 level, so their right axes are horizontal); without either, the photos
+                 upright about the cameras' mean up
     gravity      each photo's gravity from the phone (capture.json), carried into the world by
                  its pose, against the other photos'
     viewpoints   distinct photos, far apart in shooting order, stacked on one viewpoint (a few

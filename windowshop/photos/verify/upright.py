@@ -11,6 +11,12 @@ and the check does not apply. Where up already is the photos' own level, it pass
 a hypothesis made to answer this check's failure (hypotheses.photos_up) then ranks beside the
 one it answered by its other checks, and a refusal reports what it failed instead of the lean
 it mended.
+
+With neither a support plane nor a level the photos agree on, up is the cameras' mean up (or
+their ring's normal): an up only if the photos stand upright about it, give or take a hand's
+tilt. Photos turned sideways or upside down about it (their EXIF orientation lost, and a model
+too wrong for their quarter turns to agree on a level) say nothing about which way is up, and
+the object would be delivered lying on its side: the check fails.
 """
 
 from __future__ import annotations
@@ -23,6 +29,17 @@ from windowshop.scene.cameras import agreed_level, photos_level
 AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
 ADVICE = ("the object would lean: the surface it stands on is not level in the photos; "
           "photograph it with the phone held upright, or on a level surface that shows around it")
+# A photo rolled further than this about the cameras' up is held sideways or upside down: half
+# way between the tilt of a hand-held "upright" photo (random rolls of +-40 degrees still give
+# a mean up within a few degrees) and a quarter turn less that tilt. Measured: fruit's photos
+# turned by random quarters (bench/cases.py --seed 1, fruit_rolled/8@2): 4 of 8 placed 45 deg
+# wrong, up 81 deg off, from the cameras' mean; the photos rolled 48, 114, 168 and 48 deg about it
+MAX_ROLL_DEG = 60.0
+TURNED_ADVICE = ("the photos are turned different ways (sideways, upside down) and show no "
+                 "surface or level to tell which way is up, so the object would lie on its "
+                 "side: keep the photos' orientation when copying them off the phone, or "
+                 "photograph the object standing on a surface that shows around it, with the "
+                 "phone held upright")
 
 
 def angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -31,11 +48,30 @@ def angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
 
 
+def rolls(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(N,) each camera's roll about the unit `up` (3,) in degrees: 0 when `up` points to the
+    top of its photo, 180 upside down; NaN for a camera looking within 20 degrees along it."""
+    x, y = c2ws[:, :3, 0] @ up, c2ws[:, :3, 1] @ up
+    roll = np.degrees(np.arctan2(x, y))
+    return np.where(np.hypot(x, y) >= np.sin(np.radians(20.0)), roll, np.nan)
+
+
+def _cameras_up(c2ws: np.ndarray) -> Check:
+    roll = np.abs(rolls(c2ws, np.array([0.0, 0.0, 1.0])))  # the normalised frame's up
+    turned = int(np.sum(roll > MAX_ROLL_DEG))
+    detail = (f"up is the cameras' mean (no surface under the object, no level the photos "
+              f"agree on): {turned} of {len(c2ws)} photos are turned more than "
+              f"{MAX_ROLL_DEG:.0f} deg about it")
+    return Check("upright", -float(turned), 0.0, detail, TURNED_ADVICE)
+
+
 def check(hypothesis: Hypothesis) -> Check | None:
     found = hypothesis.found
-    if found is None or found.up_source not in ("plane", "photos"):
-        return None  # up comes from the phone's gravity or the cameras
+    if found is None or found.up_source not in ("plane", "photos", "cameras"):
+        return None  # up comes from the phone's gravity
     c2ws = np.stack([p.camera.c2w for p in found.photos])
+    if found.up_source == "cameras":
+        return _cameras_up(c2ws)
     if found.up_source == "photos":
         return Check("upright", AGREE_DEG, 0.0, f"up is the photos' own level (their rolls "
                      f"spread {photos_level(c2ws)[1]:.1f} deg)", ADVICE)

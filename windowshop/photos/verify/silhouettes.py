@@ -42,7 +42,9 @@ SUSPECT_COVERED = 0.4  # a photo whose mask the hull covers less than this is bl
 # temple/8@0's, 0.57, is refused). Four photos' fit parts right from wrong poorly (stop 47,
 # bench/RESULTS.md: 55 hypotheses of 4 photos from one side): right ones fit 0.51-0.94, 16 of
 # 41 under 0.6; wrong ones 0.07-0.84, temple/arc150x4@120's 48.5 degrees off at 0.57; a photo
-# turned 45-180 degrees round the object lowers the median fit by 0.01-0.25. PASS_FIT stays.
+# turned 45-180 degrees round the object lowers the median fit by 0.01-0.25. PASS_FIT stays, and
+# since stop 48 prepare needs FIT_VIEWS photos placed (prepare.check_placed): only a photo
+# without a mask leaves fewer here
 FIT_VIEWS = 5
 ADVICE = ("the object's outline in some photos does not match what the others show, so their "
           "cameras are probably misplaced: retake them with the whole object in view and more "

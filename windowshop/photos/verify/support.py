@@ -19,10 +19,11 @@ import numpy as np
 
 from windowshop.photos.verify.types import Check, Hypothesis
 
-# Measured (bench/RESULTS.md, stop 48): the least a photo of a right model saw, over 60 right
-# models (the shared and rendered captures' 8-photo subsets and one-sided arcs of 6 and 8
-# photos), was 31 (dtu_skull/arc100x8@120's 005), then 35, 35, 36, 39, 43; the misplaced photo
-# above saw 16. Half way, under COLMAP's own 30, so that no right photo measured is blamed
+# Measured (bench/RESULTS.md, stop 48): the least a photo of a right model saw, over 54 right
+# models (the shared and rendered captures' 8-photo subsets, one-sided arcs of 6 and 8 photos,
+# and whole captures), was 31 (dtu_skull/arc100x8@120's 005), then 34, 35, 35, 36, 37, 39; the
+# misplaced photo above saw 16. Half way, under COLMAP's own 30, so no right photo measured is
+# blamed
 MIN_POINTS = 24
 ADVICE = ("a photo shares too little with the others to be placed surely: retake it closer to "
           "its neighbours, with more of the same surface in view")

@@ -8,9 +8,8 @@ one side (skull_up at seed 1, 8 photos: 004 held by 16 points, 97 degrees off, e
 passed). A photo that sees fewer than MIN_POINTS points of the model is blamed, and the
 "without suspects" strategy leaves it out, named for a reshoot. A model whose median photo sees
 fewer than twice that (a plain object, every photo poor in features) is not judged by it: the
-weak photo must stand out. Photos the ring posed
-(windowshop.photos.fill) see none by construction and are marked as guesses already; they
-are not counted.
+weak photo must stand out. Photos the ring posed (windowshop.photos.fill) see none by
+construction and are marked as guesses already; they are not counted.
 """
 
 from __future__ import annotations

@@ -29,9 +29,9 @@ from windowshop.scene.cameras import agreed_level, photos_level
 AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
 ADVICE = ("the object would lean: the surface it stands on is not level in the photos; "
           "photograph it with the phone held upright, or on a level surface that shows around it")
-# A photo rolled further than this about the cameras' up is held sideways or upside down: half
-# way between the tilt of a hand-held "upright" photo (random rolls of +-40 degrees still give
-# a mean up within a few degrees) and a quarter turn less that tilt. Measured: fruit's photos
+# A photo rolled further than this about the cameras' up is held sideways or upside down: past
+# the tilt of a hand-held "upright" photo (random rolls of +-40 degrees still give a mean up
+# within a few degrees), short of a quarter turn less a hand's tilt. Measured: fruit's photos
 # turned by random quarters (bench/cases.py --seed 1, fruit_rolled/8@2): 4 of 8 placed 45 deg
 # wrong, up 81 deg off, from the cameras' mean; the photos rolled 48, 114, 168 and 48 deg about it
 MAX_ROLL_DEG = 60.0

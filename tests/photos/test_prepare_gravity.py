@@ -133,7 +133,9 @@ def test_photos_turned_by_quarters_without_sensors_stand_upright_by_their_level(
     # agrees on (measured over five runs: median 2.9-3.7 deg, the video's own rolls; by the
     # cameras' ring, as before, 14.0). Structure from motion places one or two of these 12
     # frames differently from run to run (13-82 deg off, or 140 units away, which the scale
-    # check leaves out): the up, not every pose, is under test
+    # check leaves out), and the support check leaves out those held by a handful of points
+    # (0057 at 7-18 points, its up 82 deg off when kept; 0038 at 11): 9-10 delivered over four runs.
+    # The up, not every pose, is under test
     frames = sorted((DATA / "beer_can" / "images").glob("*.jpg"))
     (tmp_path / "photos").mkdir()
     rolls = {}
@@ -146,6 +148,6 @@ def test_photos_turned_by_quarters_without_sensors_stand_upright_by_their_level(
                      show=False)
     assert result.report["priors"]["up"] == "photos", result.report["priors"]
     errors = in_image_roll_errors(tmp_path / "scene", rolls)
-    assert len(errors) >= PHOTOS - 2
+    assert len(errors) >= PHOTOS - 3
     assert np.median(list(errors.values())) <= 6.0, errors
     assert np.mean(np.array(list(errors.values())) <= 15.0) >= 0.75, errors

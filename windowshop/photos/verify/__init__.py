@@ -20,14 +20,16 @@ no masks to compare) in a module of its own:
                  background that other pairs do match (a fold of an object printed alike)
     scale        each photo's distance from the object against the object's size in its
                  outline: a photo placed far off would see it small
+    support      the sparse points each photo sees: one placed on a handful of matches is
+                 blamed and left out
 
 `verify` runs them all; windowshop.photos.hypotheses decides what to try next.
 """
 
 from __future__ import annotations
 
-from windowshop.photos.verify import (background, gravity, pairs, scale, silhouettes, upright,
-                                      viewpoints)
+from windowshop.photos.verify import (background, gravity, pairs, scale, silhouettes, support,
+                                      upright, viewpoints)
 from windowshop.photos.verify.types import Check, Hypothesis, Verdict
 
 __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
@@ -37,5 +39,5 @@ def verify(hypothesis: Hypothesis) -> Verdict:
     """Every check that applies to `hypothesis`."""
     checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check,
                                                gravity.check, viewpoints.check, scale.check,
-                                               background.check))
+                                               background.check, support.check))
     return Verdict([c for c in checks if c is not None])

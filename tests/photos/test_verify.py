@@ -285,6 +285,30 @@ def test_photos_stacked_on_one_viewpoint_fold_but_a_second_turn_does_not():
         ("p03.jpg", "p07.jpg")]
 
 
+def test_one_stacked_pair_passes_a_dense_ring_but_not_a_sparse_one():
+    """A true repeat (temple's 16-photo ring) is allowed once; 7 photos, 4 of them 128 deg off,
+    stacking one pair (the global mapper's doppelganger fold) are not."""
+    from windowshop.photos.located import Located
+    from windowshop.photos.output import PosedPhoto
+    from windowshop.photos.verify import viewpoints
+
+    def check(cams: list[Camera]):
+        photos = [PosedPhoto(f"p{k:02d}", f"p{k:02d}.jpg", c, {}) for k, c in enumerate(cams)]
+        found = Located(photos=photos, transform=np.eye(4), aabb=np.ones((2, 3)),
+                        points=np.zeros((0, 3)), masks={}, mask_kind="segmented",
+                        background="", plane=None, raw_masks={})
+        return viewpoints.check(Hypothesis("as mapped", sfm=None, found=found))
+
+    for count in (16, 8):
+        cameras = _ring(count, np.array([0, 0, 1.0]))
+        assert check(cameras).passed
+        repeat = list(cameras)  # the photo half the walk on taken from the first one's spot
+        repeat[count // 2] = cameras[0]
+        result = check(repeat)
+        assert result.score == -1.0 and result.passed == (count >= viewpoints.REPEAT_PHOTOS)
+        assert set(result.suspects) == {"p00.jpg", f"p{count // 2:02d}.jpg"}
+
+
 def test_held_out_check_reads_the_refined_psnr_against_its_threshold():
     from windowshop.photos.verify import heldout
 

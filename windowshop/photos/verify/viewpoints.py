@@ -26,6 +26,10 @@ APART_SHARE = 0.25  # photos this share of the walk or more apart in shooting or
 # 3-4 such pairs (0.1-3.3 degrees apart); the shared captures' subsets none (the nearest: two of
 # beer_can's photos 5.6 degrees apart); temple's ring holds one true repeat (0001 and 0011)
 MAX_STACKED = 1
+# ... in a ring of 16. A repeat is a dense walk's: in fewer photos than this none is allowed.
+# The global mapper folded the doppelganger box's 8@0 (stop 49): 7 photos, 4 of them 128 deg
+# off, stacking one pair (box_004 and box_024, 0.6 deg) and passing every other check
+REPEAT_PHOTOS = 12
 
 
 def walked(names: list[str], centres: np.ndarray) -> np.ndarray:
@@ -67,4 +71,5 @@ def check(hypothesis: Hypothesis) -> Check | None:
               + (": " + ", ".join(f"{a}-{b} {d:.1f} deg" for a, b, d in pairs[:5]) if pairs
                  else ""))
     blamed = tuple(sorted({n for a, b, _ in pairs for n in (a, b)}))
-    return Check("viewpoints", -float(len(pairs)), -float(MAX_STACKED), detail, ALIKE, blamed)
+    allowed = MAX_STACKED if len(names) >= REPEAT_PHOTOS else 0
+    return Check("viewpoints", -float(len(pairs)), -float(allowed), detail, ALIKE, blamed)

@@ -7,10 +7,11 @@ photo's pitch (a photo turned a quarter, its EXIF lost, has its up axis horizont
 scene.cameras.photos_level). When those axes agree on one such direction (their rolls spread by
 a few degrees) the photos know where up is; a support plane far from it is a slope, a wall or a
 pedestal's side, and the object would lean in every frame. Photos at random rolls know nothing,
-and the check does not apply. Where up already is the photos' own level, it passes as it is:
-a hypothesis made to answer this check's failure (hypotheses.photos_up) then ranks beside the
-one it answered by its other checks, and a refusal reports what it failed instead of the lean
-it mended.
+and the check does not apply; nor does it to photos turned by quarters (their EXIF lost), whose
+level is weaker evidence than the plane. Where up already is the photos' own level, it passes as
+it is: a hypothesis made to answer this check's failure (hypotheses.photos_up) then ranks beside
+the one it answered by its other checks, and a refusal reports what it failed instead of the
+lean it mended.
 
 With neither a support plane nor a level the photos agree on, up is the cameras' mean up (or
 their ring's normal): an up only if the photos stand upright about it, give or take a hand's
@@ -24,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from windowshop.photos.verify.types import Check, Hypothesis
-from windowshop.scene.cameras import agreed_level, photos_level
+from windowshop.scene.cameras import photos_level, upright_level
 
 AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
 ADVICE = ("the object would lean: the surface it stands on is not level in the photos; "
@@ -75,11 +76,15 @@ def check(hypothesis: Hypothesis) -> Check | None:
     if found.up_source == "photos":
         return Check("upright", AGREE_DEG, 0.0, f"up is the photos' own level (their rolls "
                      f"spread {photos_level(c2ws)[1]:.1f} deg)", ADVICE)
-    theirs = agreed_level(c2ws)
+    # only photos held upright outweigh the plane: quarter-turned ones can agree on a wrong up
+    # as well as on the right one, told apart by the walk's steady height, which a one-sided
+    # capture does not show (fruit_rolled/arc60x6@0: their level 27 deg from the true up, the
+    # plane's 7; the photos' up was delivered)
+    theirs = upright_level(c2ws)
     if theirs is None:
         return None
-    off = angle(theirs, np.array([0.0, 0.0, 1.0]))  # the normalised frame's up is the plane's
+    off = angle(theirs[0], np.array([0.0, 0.0, 1.0]))  # the normalised frame's up is the plane's
     detail = (f"the support plane's up is {off:.1f} deg from the photos' own "
-              f"(their rolls spread {photos_level(c2ws)[1]:.1f} deg)")
+              f"(their rolls spread {theirs[1]:.1f} deg)")
     # scored so that higher is better and the threshold is 0: AGREE_DEG minus the angle
     return Check("upright", AGREE_DEG - off, 0.0, detail, ADVICE)

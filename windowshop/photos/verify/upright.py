@@ -78,8 +78,9 @@ def check(hypothesis: Hypothesis) -> Check | None:
                      f"spread {photos_level(c2ws)[1]:.1f} deg)", ADVICE)
     # only photos held upright outweigh the plane: quarter-turned ones can agree on a wrong up
     # as well as on the right one, told apart by the walk's steady height, which a one-sided
-    # capture does not show (fruit_rolled/arc60x6@0: their level 27 deg from the true up, the
-    # plane's 7; the photos' up was delivered)
+    # capture does not show (fruit_rolled/arc60x6@0: their right axes agreed on an up the
+    # cameras looked 73-87 deg along, 54 deg from the true up, their quarter rule on one 27
+    # deg off, the plane 7; the photos' up was delivered)
     theirs = upright_level(c2ws)
     if theirs is None:
         return None

@@ -153,9 +153,6 @@ def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
     degrees, most turned a quarter. Their right axes (true up axes, tilted to the object) agree
     on an up the cameras look along, level for any roll; and a quarter-turned level, right or
     wrong, does not fail the support plane."""
-    from windowshop.photos.located import Located
-    from windowshop.photos.output import PosedPhoto
-
     up = np.array([0.0, 0.0, 1.0])
     cams = []
     for k, roll in enumerate((270.0, 270.0, 180.0, 90.0, 90.0, 270.0)):
@@ -167,13 +164,9 @@ def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
     c2ws = np.stack(cams)
     assert upright.angle(_level_of_rights(c2ws), up) > 30.0  # the right axes' "level"
     assert upright_level(c2ws) is None
-    photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", Camera(fx=300.0, fy=300.0, cx=160.0, cy=120.0,
-                                                     width=320, height=240, c2w=c), {})
-              for k, c in enumerate(cams)]
-    found = Located(photos=photos, transform=np.eye(4), aabb=np.ones((2, 3)),
-                    points=np.zeros((0, 3)), masks={}, mask_kind="segmented", background="",
-                    plane=None, raw_masks={})
-    assert upright.check(Hypothesis("as mapped", sfm=None, found=found)) is None
+    cameras = [Camera(fx=300.0, fy=300.0, cx=160.0, cy=120.0, width=320, height=240, c2w=c)
+               for c in cams]
+    assert upright.check(_located(cameras)) is None
 
 
 def _level_of_rights(c2ws: np.ndarray) -> np.ndarray:
@@ -317,23 +310,14 @@ def test_photos_stacked_on_one_viewpoint_fold_but_a_second_turn_does_not():
 def test_one_stacked_pair_passes_a_dense_ring_but_not_a_sparse_one():
     """A true repeat (temple's 16-photo ring) is allowed once; 7 photos, 4 of them 128 deg off,
     stacking one pair (the global mapper's doppelganger fold) are not."""
-    from windowshop.photos.located import Located
-    from windowshop.photos.output import PosedPhoto
     from windowshop.photos.verify import viewpoints
-
-    def check(cams: list[Camera]):
-        photos = [PosedPhoto(f"p{k:02d}", f"p{k:02d}.jpg", c, {}) for k, c in enumerate(cams)]
-        found = Located(photos=photos, transform=np.eye(4), aabb=np.ones((2, 3)),
-                        points=np.zeros((0, 3)), masks={}, mask_kind="segmented",
-                        background="", plane=None, raw_masks={})
-        return viewpoints.check(Hypothesis("as mapped", sfm=None, found=found))
 
     for count in (16, 8):
         cameras = _ring(count, np.array([0, 0, 1.0]))
-        assert check(cameras).passed
+        assert viewpoints.check(_located(cameras)).passed
         repeat = list(cameras)  # the photo half the walk on taken from the first one's spot
         repeat[count // 2] = cameras[0]
-        result = check(repeat)
+        result = viewpoints.check(_located(repeat))
         assert result.score == -1.0 and result.passed == (count >= viewpoints.REPEAT_PHOTOS)
         assert set(result.suspects) == {"p00.jpg", f"p{count // 2:02d}.jpg"}
 
@@ -362,12 +346,13 @@ def test_a_refusal_reports_the_failure_of_the_latest_of_equally_ranked_hypothese
     assert hypotheses.fallback(better) is better[1]  # as many failed, more checks made
 
 
-def _located(cameras: list[Camera], up_source: str) -> Hypothesis:
-    """A hypothesis whose object was found with `up_source`, its photos at `cameras`."""
+def _located(cameras: list[Camera], up_source: str = "plane") -> Hypothesis:
+    """A hypothesis whose object was found with `up_source`, its photos at `cameras` (named in
+    shooting order)."""
     from windowshop.photos.located import Located
     from windowshop.photos.output import PosedPhoto
 
-    photos = [PosedPhoto(f"p{k}", f"p{k}.jpg", c, {}) for k, c in enumerate(cameras)]
+    photos = [PosedPhoto(f"p{k:02d}", f"p{k:02d}.jpg", c, {}) for k, c in enumerate(cameras)]
     found = Located(photos=photos, transform=np.eye(4), aabb=np.array([[-1.0] * 3, [1.0] * 3]),
                     points=np.zeros((0, 3)), masks={}, mask_kind="segmented", background="",
                     plane=None, up_source=up_source)

@@ -49,9 +49,10 @@ least half the photos; report.json's "priors" is kept.
 
 up_error_deg (every delivered case with known poses and a known true up): degrees between the
 delivered scene's up and the true up. prepare's normalised frame has up = +z; the delivered
-camera centres are aligned to the published ones by the similarity (windowshop.photos.align.umeyama)
-fitted on the correctly placed photos (all scored photos when fewer than 3 are correct), and the
-delivered +z is mapped through its rotation. The true up is:
+cameras' rotations are turned onto the published ones (windowshop.photos.align.rotation_between:
+camera centres on a narrow arc leave a similarity loose, 30 deg on 6 photos over 60 deg) by the
+correctly placed photos (all scored photos when fewer than 3 are correct), and the delivered +z
+is mapped through that turn. The true up is:
   shared captures  windowshop.scene.cameras.up_vector(c2ws, "level") of all the capture's
                    published cameras (photos are taken level; for beer_can, its trustworthy
                    frames). dtu_skull: 2.0 deg RMS roll about it, every camera 5-70 deg above
@@ -89,7 +90,7 @@ from provenance import emit, machine
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
-from windowshop.photos.align import umeyama
+from windowshop.photos.align import rotation_between
 from windowshop.photos.ingest import IMAGE_SUFFIXES
 from windowshop.photos.prepare import prepare
 from windowshop.photos.sensors import CAPTURE_FILE, FORMAT
@@ -301,16 +302,16 @@ def arc_cases(capture: Capture, count: int, arc: float, starts: tuple[float, ...
 def up_error(recovered: dict[str, np.ndarray], truth: dict[str, np.ndarray], right: set[str],
              up: np.ndarray) -> float | None:
     """Degrees between the delivered up (+z of prepare's normalised frame, where `recovered`'s
-    c2ws are) and the true `up`, through the similarity aligning the correctly placed photos'
-    centres (`right`; all of `recovered` when fewer than 3) to the true ones; None when fewer
+    c2ws are) and the true `up`, through the rotation turning the correctly placed photos'
+    cameras (`right`; all of `recovered` when fewer than 3) onto the true ones; None when fewer
     than 3 photos can be aligned."""
     names = sorted(right) if len(right) >= 3 else sorted(recovered)
     if len(names) < 3:
         return None
-    _, rot, _ = umeyama(np.stack([recovered[n][:3, 3] for n in names]),
-                        np.stack([truth[n][:3, 3] for n in names]))
+    rot = rotation_between(np.stack([recovered[n][:3, :3] for n in names]),
+                           np.stack([truth[n][:3, :3] for n in names]))
     mapped = rot @ np.array([0.0, 0.0, 1.0])
-    cosine = mapped @ up / (np.linalg.norm(mapped) * np.linalg.norm(up))
+    cosine = mapped @ up / np.linalg.norm(up)
     return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
 
 

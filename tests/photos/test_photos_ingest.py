@@ -86,11 +86,11 @@ def test_duplicates_and_blurred_are_dropped_with_names(tmp_path):
     assert dropped.reasons["shaky.jpg"].startswith("too blurred")
 
 
-def test_fewer_than_three_usable_photos(tmp_path):
-    files = sorted(KERMIT.glob("*.jpg"))[:2]
+def test_fewer_than_five_usable_photos(tmp_path):
+    files = sorted(KERMIT.glob("*.jpg"))[:4]
     copy = tmp_path / "copy.jpg"
     copy.write_bytes(files[0].read_bytes())
-    with pytest.raises(UserError, match=r"only 2 usable photos; .* at least 3") as err:
+    with pytest.raises(UserError, match=r"only 4 usable photos; .* at least 5") as err:
         ingest.read_photos([*files, copy], None, ingest.Dropped())
     assert "copy.jpg: exact duplicate of kermit000.jpg" in str(err.value)
 

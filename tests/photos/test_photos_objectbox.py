@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from windowshop.photos import objectbox
-from windowshop.photos.align import pose_errors, rotation_angle, umeyama
+from windowshop.photos.align import pose_errors, rotation_angle, rotation_between, umeyama
 from windowshop.scene.cameras import look_at
 from windowshop.scene.types import Camera
 from shared_data import DATA
@@ -121,6 +121,18 @@ def test_umeyama_recovers_a_similarity():
     assert scale == pytest.approx(2.5)
     np.testing.assert_allclose(r, rot, atol=1e-9)
     np.testing.assert_allclose(t, [1.0, -2.0, 0.5], atol=1e-9)
+
+
+def test_rotation_between_reads_the_world_turn_from_the_cameras_alone():
+    # six cameras on a 60-degree arc, every one turned by 2 degrees of its own on top of the
+    # world's turn: the turn comes back within those degrees, whatever the centres do
+    rng = np.random.default_rng(3)
+    world = _rot_x(70.0) @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    truth = np.stack([c.c2w[:3, :3] for c in _ring(n=36)[:6]])
+    noisy = np.stack([r @ _rot_x(2.0 * rng.choice([-1, 1])) for r in truth])
+    found = rotation_between(noisy, world @ truth)
+    assert rotation_angle(found.T @ world) < 2.0
+    np.testing.assert_allclose(rotation_between(truth, world @ truth), world, atol=1e-9)
 
 
 def test_pose_errors_see_only_real_differences():

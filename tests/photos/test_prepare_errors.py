@@ -33,22 +33,22 @@ def _fails(source: Path, out: Path, match: str, **options) -> UserError:
 
 
 def test_a_file_that_is_not_an_image(tmp_path):
-    photos = _kermit(tmp_path / "photos", 3)
+    photos = _kermit(tmp_path / "photos", 5)
     (photos / "receipt.jpg").write_text("total: 12.50")
     _fails(photos, tmp_path / "out", r"receipt\.jpg: not an image")
 
 
 def test_a_truncated_photo(tmp_path):
-    photos = _kermit(tmp_path / "photos", 3)
+    photos = _kermit(tmp_path / "photos", 5)
     data = (KERMIT / "kermit005.jpg").read_bytes()
     (photos / "half.jpg").write_bytes(data[: len(data) // 2])
     _fails(photos, tmp_path / "out", r"half\.jpg: the image is truncated or damaged")
 
 
-def test_fewer_than_three_usable_photos(tmp_path):
-    photos = _kermit(tmp_path / "photos", 2)
+def test_fewer_than_five_usable_photos(tmp_path):
+    photos = _kermit(tmp_path / "photos", 4)
     shutil.copyfile(photos / "kermit000.jpg", photos / "kermit000_again.jpg")
-    err = _fails(photos, tmp_path / "out", r"only 2 usable photos; windowshop needs at least 3")
+    err = _fails(photos, tmp_path / "out", r"only 4 usable photos; windowshop needs at least 5")
     assert "kermit000_again.jpg: exact duplicate of kermit000.jpg" in str(err)
 
 
@@ -59,15 +59,16 @@ def test_no_photos_at_all(tmp_path):
 
 
 def test_photos_that_cannot_be_placed(tmp_path):
-    """Four photos of four different things share no view: nothing can be placed."""
+    """Five photos of five different things share no view: nothing can be placed."""
     photos = tmp_path / "photos"
     photos.mkdir()
     for source in [KERMIT / "kermit000.jpg", DATA / "temple_sparse" / "templeSR0001.png",
-                   DATA / "beer_can" / "images" / "0000.jpg", DATA / "lego" / "train" / "r_0.png"]:
+                   DATA / "beer_can" / "images" / "0000.jpg", DATA / "lego" / "train" / "r_0.png",
+                   DATA / "dtu_skull" / "images" / "000.jpg"]:
         name = f"{source.parent.parent.name}_{source.stem}.png"
         Image.open(source).convert("RGB").save(photos / name)
     err = _fails(photos, tmp_path / "out", r"(?i)take more photos with overlap")
-    assert "could only place 0 of 4 photos" in str(err) and "data_kermit000.png" in str(err)
+    assert "could only place 0 of 5 photos" in str(err) and "data_kermit000.png" in str(err)
 
 
 def test_too_little_texture(tmp_path):

@@ -148,25 +148,37 @@ def test_photos_looking_level_at_quarter_rolls_are_not_read_as_lying_down():
     assert found is not None and upright.angle(found, up) < 1.0
 
 
-def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
-    """fruit_rolled/arc60x6@0's shape: six photos over 60 degrees of arc, looking down 37
-    degrees, most turned a quarter. Their right axes (true up axes, tilted to the object) agree
-    on an up the cameras look along, level for any roll; and a quarter-turned level, right or
-    wrong, does not fail the support plane."""
-    up = np.array([0.0, 0.0, 1.0])
+def _one_side_at_quarters() -> np.ndarray:
+    """fruit_rolled/arc60x6@0's shape (N, 4, 4): six photos over 60 degrees of arc about +z,
+    looking down 37 degrees, most turned a quarter."""
     cams = []
     for k, roll in enumerate((270.0, 270.0, 180.0, 90.0, 90.0, 270.0)):
         a = np.radians(12.0 * k)
         c2w = look_at(3.0 * np.array([np.cos(a), np.sin(a), np.tan(np.radians(37.0))]),
-                      np.zeros(3), up)
+                      np.zeros(3), np.array([0.0, 0.0, 1.0]))
         c2w[:3, :3] = c2w[:3, :3] @ Rotation.from_euler("z", roll, degrees=True).as_matrix()
         cams.append(c2w)
-    c2ws = np.stack(cams)
-    assert upright.angle(_level_of_rights(c2ws), up) > 30.0  # the right axes' "level"
+    return np.stack(cams)
+
+
+def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
+    """Their right axes (true up axes, tilted to the object) agree on an up the cameras look
+    along, level for any roll; and a quarter-turned level, right or wrong, does not fail the
+    support plane."""
+    c2ws = _one_side_at_quarters()
+    assert upright.angle(_level_of_rights(c2ws), [0.0, 0.0, 1.0]) > 30.0  # the rights' "level"
     assert upright_level(c2ws) is None
     cameras = [Camera(fx=300.0, fy=300.0, cx=160.0, cy=120.0, width=320, height=240, c2w=c)
-               for c in cams]
+               for c in c2ws]
     assert upright.check(_located(cameras)) is None
+
+
+def test_photos_of_one_side_turned_by_quarters_agree_on_no_up():
+    # with no plane either: their level lies 55 deg off the true up, along the cameras' view
+    c2ws = _one_side_at_quarters()
+    level, spread = photos_level(c2ws)
+    assert spread < LEVEL_SPREAD_DEG and upright.angle(level, [0.0, 0.0, 1.0]) > 30.0
+    assert agreed_level(c2ws) is None
 
 
 def _level_of_rights(c2ws: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ def image_bytes(fmt: str = "JPEG", size=(40, 30), seed: int = 0) -> bytes:
     return buf.getvalue()
 
 
-def photos(n: int = 3, fmt: str = "JPEG") -> list:
+def photos(n: int = 5, fmt: str = "JPEG") -> list:
     return [("files", (f"IMG_{i}.jpg", image_bytes(fmt, seed=i), "image/jpeg")) for i in range(n)]
 
 
@@ -99,44 +99,46 @@ def refused(response, status: int, code: str) -> str:
 def test_a_job_may_lower_its_settings_but_not_raise_them(client):
     from windowshop.service.jobs import load_job_config
 
-    job = client.post("/api/jobs", files=photos(3), data={"settings": '{"render.frames": 12}'})
+    job = client.post("/api/jobs", files=photos(), data={"settings": '{"render.frames": 12}'})
     assert job.status_code == 201, job.text
     folder = client.settings.jobs_dir / job.json()["id"]
     config = load_job_config(folder, client.settings)
     assert config.render.frames == 12 and config.fit == client.settings.job.fit
-    detail = refused(client.post("/api/jobs", files=photos(3),
+    detail = refused(client.post("/api/jobs", files=photos(),
                                  data={"settings": '{"fit.seconds": 9999}'}), 422, "bad_settings")
     assert "fit.seconds may be at most 30" in detail
-    refused(client.post("/api/jobs", files=photos(3), data={"settings": "[1]"}), 422, "bad_settings")
-    refused(client.post("/api/jobs", files=photos(3), data={"settings": '{"warp": 9}'}), 422,
+    refused(client.post("/api/jobs", files=photos(), data={"settings": "[1]"}), 422, "bad_settings")
+    refused(client.post("/api/jobs", files=photos(), data={"settings": '{"warp": 9}'}), 422,
             "bad_settings")
     assert len(job_folders(client)) == 1  # refused uploads leave nothing behind
 
 
 def test_photos_make_a_queued_job_with_an_unguessable_id(client):
-    first = client.post("/api/jobs", files=photos(3))
-    second = client.post("/api/jobs", files=photos(4))
+    first = client.post("/api/jobs", files=photos(5))
+    second = client.post("/api/jobs", files=photos(6))
     assert first.status_code == second.status_code == 201
     a, b = first.json(), second.json()
     assert len(a["id"]) >= 22 and a["id"] != b["id"]  # 128 random bits, URL-safe
     assert a["url"] == f"/api/jobs/{a['id']}" and a["page"] == f"/jobs/{a['id']}"
     status = client.get(a["url"]).json()
-    assert (status["state"], status["error"], status["input"]) == ("queued", None, "3 photos")
+    assert (status["state"], status["error"], status["input"]) == ("queued", None, "5 photos")
     assert status["queue_position"] == 0
     assert client.get(b["url"]).json()["queue_position"] == 1
     assert status["links"] == {"video": None, "poster": None, "frames": [], "report": None,
                                "coverage": None, "model": None, "usdz": None}
     names = sorted(p.name for p in (client.settings.jobs_dir / a["id"] / "input").iterdir())
-    assert names == ["IMG_0.jpg", "IMG_1.jpg", "IMG_2.jpg"]  # photo names kept, upload parts gone
+    assert names == [f"IMG_{i}.jpg" for i in range(5)]  # photo names kept, upload parts gone
 
 
 def test_photo_names_are_made_safe_and_suffixes_follow_content(client):
     files = [("files", ("../../evil name.png", image_bytes("JPEG", seed=1), "image/png")),
              ("files", ("a.webp", image_bytes("WEBP", seed=2), "image/webp")),
-             ("files", ("a.jpg", image_bytes("PNG", seed=3), "image/jpeg"))]
+             ("files", ("a.jpg", image_bytes("PNG", seed=3), "image/jpeg")),
+             ("files", ("b.jpg", image_bytes("JPEG", seed=4), "image/jpeg")),
+             ("files", ("c.jpg", image_bytes("JPEG", seed=5), "image/jpeg"))]
     job = client.post("/api/jobs", files=files).json()
     names = sorted(p.name for p in (client.settings.jobs_dir / job["id"] / "input").iterdir())
-    assert names == ["a-002.png", "a.webp", "evil_name.jpg"]
+    assert names == ["a-002.png", "a.webp", "b.jpg", "c.jpg", "evil_name.jpg"]
 
 
 def capture_json(names: list[str], **overrides) -> bytes:
@@ -147,20 +149,19 @@ def capture_json(names: list[str], **overrides) -> bytes:
 
 
 def test_photos_shot_on_the_page_bring_their_capture_json(client):
-    names = [f"capture-{i:03d}.jpg" for i in range(3)]
+    names = [f"capture-{i:03d}.jpg" for i in range(5)]
     files = [("files", (n, image_bytes(seed=i), "image/jpeg")) for i, n in enumerate(names)]
     files.append(("files", ("capture.json", capture_json(names), "application/json")))
     job = client.post("/api/jobs", files=files)
     assert job.status_code == 201, job.text
     folder = client.settings.jobs_dir / job.json()["id"] / "input"
-    assert sorted(p.name for p in folder.iterdir()) == ["capture-000.jpg", "capture-001.jpg",
-                                                         "capture-002.jpg", "capture.json"]
-    assert client.get(job.json()["url"]).json()["input"] == "3 photos"  # the JSON is no photo
+    assert sorted(p.name for p in folder.iterdir()) == [*names, "capture.json"]
+    assert client.get(job.json()["url"]).json()["input"] == "5 photos"  # the JSON is no photo
     assert json.loads((folder / "capture.json").read_text())["photos"][2]["heading_deg"] == 24.0
 
 
 def test_a_capture_json_that_is_not_the_pages_is_refused(client):
-    files = photos(3) + [("files", ("capture.json", b'{"photos": 3}', "application/json"))]
+    files = photos() + [("files", ("capture.json", b'{"photos": 3}', "application/json"))]
     detail = refused(client.post("/api/jobs", files=files), 400, "bad_capture")
     assert "capture.json" in detail and "windowshop-capture" in detail
     assert job_folders(client) == []  # nothing of the refused upload is kept
@@ -168,11 +169,11 @@ def test_a_capture_json_that_is_not_the_pages_is_refused(client):
 
 def test_heic_photos_from_phones_are_taken(client):
     pytest.importorskip("pillow_heif")
-    files = [("files", (f"IMG_{i}.HEIC", image_bytes("HEIF", seed=i), "image/heic")) for i in range(3)]
+    files = [("files", (f"IMG_{i}.HEIC", image_bytes("HEIF", seed=i), "image/heic")) for i in range(5)]
     job = client.post("/api/jobs", files=files)
     assert job.status_code == 201, job.text
     names = sorted(p.name for p in (client.settings.jobs_dir / job.json()["id"] / "input").iterdir())
-    assert names == ["IMG_0.heic", "IMG_1.heic", "IMG_2.heic"]
+    assert names == [f"IMG_{i}.heic" for i in range(5)]
 
 
 def test_a_video_makes_a_job(client, tmp_path):
@@ -197,26 +198,26 @@ def test_a_zip_of_a_posed_scene_is_unpacked(client):
 # ---- refusals: each a 4xx with JSON, and nothing left on disk --------------------------------
 
 def test_refusals_of_the_form(make_client, tmp_path):
-    client = make_client(max_files=3)
+    client = make_client(max_files=5)
     refused(client.post("/api/jobs", data={"other": "x"}), 400, "no_files")
     refused(client.post("/api/jobs", data={"files": "not a file"}), 400, "bad_form")
-    detail = refused(client.post("/api/jobs", files=photos(4)), 400, "too_many_files")
-    assert "3" in detail
-    refused(client.post("/api/jobs", files=photos(2)), 400, "too_few_photos")
+    detail = refused(client.post("/api/jobs", files=photos(6)), 400, "too_many_files")
+    assert "5" in detail
+    refused(client.post("/api/jobs", files=photos(4)), 400, "too_few_photos")
     mixed = photos(2) + [("files", ("v.mp4", video_bytes(tmp_path), "video/mp4"))]
     refused(client.post("/api/jobs", files=mixed), 400, "mixed_upload")
     assert job_folders(client) == []
 
 
 def test_refusals_of_types_by_content(client, tmp_path):
-    text = [("files", ("photo.jpg", b"just some text, named like a photo", "image/jpeg"))] * 3
+    text = [("files", ("photo.jpg", b"just some text, named like a photo", "image/jpeg"))] * 5
     assert "'photo.jpg'" in refused(client.post("/api/jobs", files=text), 415, "unsupported_type")
-    truncated = photos(2) + [("files", ("cut.jpg", image_bytes()[:300], "image/jpeg"))]
+    truncated = photos(4) + [("files", ("cut.jpg", image_bytes()[:300], "image/jpeg"))]
     assert "'cut.jpg'" in refused(client.post("/api/jobs", files=truncated), 415, "broken_image")
     gif = io.BytesIO()
     Image.new("RGB", (8, 8)).save(gif, "GIF")
     # A GIF starts with no signature we take, so it is refused before decoding.
-    refused(client.post("/api/jobs", files=[("files", ("a.gif", gif.getvalue(), "image/gif"))] * 3),
+    refused(client.post("/api/jobs", files=[("files", ("a.gif", gif.getvalue(), "image/gif"))] * 5),
             415, "unsupported_type")
     fake_video = b"\x00\x00\x00\x18ftypisom" + bytes(200)
     refused(client.post("/api/jobs", files=[("files", ("v.mp4", fake_video, "video/mp4"))]),
@@ -229,7 +230,7 @@ def test_refusals_of_types_by_content(client, tmp_path):
 def test_refusals_of_sizes(make_client, tmp_path):
     client = make_client(max_pixels=4000, max_file_bytes=50_000, max_upload_bytes=200_000,
                          max_video_seconds=0.5)
-    big = [("files", ("big.png", image_bytes("PNG", size=(80, 60)), "image/png"))] * 3
+    big = [("files", ("big.png", image_bytes("PNG", size=(80, 60)), "image/png"))] * 5
     assert "4800" in refused(client.post("/api/jobs", files=big), 413, "too_many_pixels")
     heavy = [("files", ("heavy.bin", bytes(60_000), "image/jpeg"))]
     refused(client.post("/api/jobs", files=heavy), 413, "file_too_large")
@@ -261,7 +262,7 @@ def test_a_decompression_bomb_is_refused(client):
     bomb = io.BytesIO()
     Image.new("L", (10_000, 10_000)).save(bomb, "PNG")  # 100 Mpx in under 100 kB
     assert len(bomb.getvalue()) < 200_000
-    files = photos(2) + [("files", ("bomb.png", bomb.getvalue(), "image/png"))]
+    files = photos(4) + [("files", ("bomb.png", bomb.getvalue(), "image/png"))]
     assert "'bomb.png'" in refused(client.post("/api/jobs", files=files), 413, "too_many_pixels")
 
 

@@ -118,7 +118,7 @@ def test_uploads_are_refused_under_the_free_space_floor(tmp_path, monkeypatch):
 def test_an_upload_over_the_job_size_cap_is_refused(tmp_path):
     normal, limited = _two_clients(tmp_path, max_job_bytes=3000)
     saved = normal.post("/api/jobs", files=photos()).json()["id"]
-    big = photos(n=3)  # 3 photos of noise, over 3000 bytes together
+    big = photos()  # 5 photos of noise, over 3000 bytes together
     assert "at most 0.0 MiB" in refused(limited.post("/api/jobs", files=big), 413, "job_too_large")
     assert sorted(p.name for p in (tmp_path / "data" / "jobs").iterdir()) == [saved]
     assert (tmp_path / "data" / "jobs" / saved / "input").is_dir()

@@ -28,6 +28,16 @@ def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.nda
     return scale, rot, mu_d - scale * rot @ mu_s
 
 
+def rotation_between(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) R minimising sum |R src_i - dst_i|^2 (Frobenius) over corresponding
+    camera rotations src, dst (N, 3, 3): the world turn between two frames read from where the
+    cameras look, which a narrow arc's centres, nearly on a line, leave loose."""
+    u, _, vt = np.linalg.svd(np.einsum("nij,nkj->ik", dst, src))
+    d = np.eye(3)
+    d[2, 2] = np.sign(np.linalg.det(u @ vt))
+    return u @ d @ vt
+
+
 @dataclass
 class PoseErrors:
     """Per-camera errors after alignment, in the order of the names given."""

@@ -19,7 +19,7 @@ from windowshop.errors import UserError
 from windowshop.media import HEIF, HEIF_SUFFIXES, IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_hidden, unzip
 from windowshop.photos.sensors import CAPTURE_FILE, find_capture
 
-MIN_PHOTOS = 3
+MIN_PHOTOS = 5  # below this the verifier's checks cannot tell a right model from a wrong one
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
 
 @dataclass

@@ -50,7 +50,7 @@ class ServiceSettings(BaseSettings):
     max_file_bytes: int = 200 * 2**20  # one file (a video or a zip may be large)
     max_upload_bytes: int = 500 * 2**20  # the whole request
     max_pixels: int = 40_000_000  # per image: larger ones are refused as decompression bombs
-    min_photos: int = 3  # fewer photos cannot be posed
+    min_photos: int = 5  # fewer photos cannot be checked (photos/ingest.MIN_PHOTOS)
     max_zip_entries: int = 2000
     max_unpacked_bytes: int = 1 * 2**30  # a zip's entries together, once unpacked
     max_video_seconds: float = 300.0

@@ -31,7 +31,9 @@ folder of links to its photos. Outcome:
   right            delivered, the median error of every delivered pair's relative rotation is
                    <= RIGHT_DEG and at least RIGHT_SHARE of the delivered (scored) photos are
                    correct (bench_fewphoto.correct: the photo's pose within 10 degrees and 0.2 of
-                   the capture radius under the similarity the most of them agree with);
+                   the capture radius under the similarity the most of them agree with), and
+                   the delivered up (up_error_deg, below) within UP_RIGHT_DEG of the true one:
+                   right poses of an object that leans are no right result;
   wrong-delivered  delivered, and not right;
   delivered-unscored  delivered, fewer than 3 of its photos with trustworthy published poses
                    (kermit has none; beer_can's are trustworthy only on frames 0000-0013);
@@ -98,6 +100,7 @@ from windowshop.scene.cameras import up_vector
 
 RIGHT_DEG = 5.0  # a delivered scene is right when the median relative rotation error is at most
 RIGHT_SHARE = 0.9  # this, and at least this share of its scored photos are correct
+UP_RIGHT_DEG = 10.0  # ... and its up within this of the true up (an object seen to lean)
 ARC_STARTS = (0.0, 120.0, 240.0)  # --arcs: the azimuths each one-sided case starts from
 OUTCOMES = ("right", "refused", "wrong-delivered", "delivered-unscored", "error")
 
@@ -330,7 +333,8 @@ def score(row: dict, delivered: dict[str, np.ndarray], truth: dict[str, np.ndarr
                rotation_deg_median=None if median is None else round(median, 2),
                rotation_deg_max=round(float(errors.max()), 2) if len(errors) else None)
     good = (median is not None and median <= RIGHT_DEG
-            and len(right) >= RIGHT_SHARE * len(recovered))
+            and len(right) >= RIGHT_SHARE * len(recovered)
+            and (row.get("up_error_deg") or 0.0) <= UP_RIGHT_DEG)
     row["outcome"] = "right" if good else "wrong-delivered"
 
 

@@ -17,7 +17,9 @@ With neither a support plane nor a level the photos agree on, up is the cameras'
 their ring's normal): an up only if the photos stand upright about it, give or take a hand's
 tilt. Photos turned sideways or upside down about it (their EXIF orientation lost, and a model
 too wrong for their quarter turns to agree on a level) say nothing about which way is up, and
-the object would be delivered lying on its side: the check fails.
+the object would be delivered lying on its side: the check fails. So it does for cameras that
+do not go all round: each camera's up leans toward what it looks at by its pitch, and only a
+ring cancels that lean.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from windowshop.photos.verify.types import Check, Hypothesis
-from windowshop.scene.cameras import photos_level, upright_level
+from windowshop.scene.cameras import nearest_point_to_axes, photos_level, upright_level
+from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, covered_arc
 
 AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
 ADVICE = ("the object would lean: the surface it stands on is not level in the photos; "
@@ -41,6 +44,10 @@ TURNED_ADVICE = ("the photos are turned different ways (sideways, upside down) a
                  "side: keep the photos' orientation when copying them off the phone, or "
                  "photograph the object standing on a surface that shows around it, with the "
                  "phone held upright")
+ONE_SIDE_ADVICE = ("which way is up cannot be told: the photos show no surface around the "
+                   "object, were not held level and see it from one side; photograph it "
+                   "standing on a surface that shows around it, holding the phone level, or "
+                   "walk all round it")
 
 
 def angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -58,12 +65,21 @@ def rolls(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
 
 
 def _cameras_up(c2ws: np.ndarray) -> Check:
-    roll = np.abs(rolls(c2ws, np.array([0.0, 0.0, 1.0])))  # the normalised frame's up
+    up = np.array([0.0, 0.0, 1.0])  # the normalised frame's
+    roll = np.abs(rolls(c2ws, up))
     turned = int(np.sum(roll > MAX_ROLL_DEG))
-    detail = (f"up is the cameras' mean (no surface under the object, no level the photos "
-              f"agree on): {turned} of {len(c2ws)} photos are turned more than "
-              f"{MAX_ROLL_DEG:.0f} deg about it")
-    return Check("upright", -float(turned), 0.0, detail, TURNED_ADVICE)
+    why = "up is the cameras' mean (no surface under the object, no level the photos agree on)"
+    if turned:
+        detail = (f"{why}: {turned} of {len(c2ws)} photos are turned more than "
+                  f"{MAX_ROLL_DEG:.0f} deg about it")
+        return Check("upright", -float(turned), 0.0, detail, TURNED_ADVICE)
+    # each camera's up leans toward what it looks at by its pitch, which only cameras all
+    # round cancel: five frames of a can over 21 degrees were delivered leaning 24 degrees
+    span = covered_arc(azimuths_about(c2ws[:, :3, 3], nearest_point_to_axes(c2ws), up,
+                                      np.array([1.0, 0.0, 0.0])))[1]
+    detail = (f"{why}, which leans by their pitch unless they go all round: they cover "
+              f"{span:.0f} deg of the circle (all round is {FULL_TURN_SPAN:.0f})")
+    return Check("upright", span - FULL_TURN_SPAN, 0.0, detail, ONE_SIDE_ADVICE)
 
 
 def check(hypothesis: Hypothesis) -> Check | None:

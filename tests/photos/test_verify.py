@@ -133,6 +133,16 @@ def test_photos_turned_by_quarters_give_their_up_and_the_cameras_stand_above_it(
     assert photos_level(c2ws)[1] < LEVEL_SPREAD_DEG
 
 
+def test_photos_mostly_upside_down_give_their_up_by_where_the_cameras_stand():
+    # right axes agree on the level whichever way up each photo is held; an upside-down photo
+    # says the EXIF orientation was lost, so the majority of the photos' ups is no sign
+    up = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    rolls = np.array([180.0, 0, 180, 180, 0, 180, 180, 0]) + np.random.default_rng(2).normal(0, 2, 8)
+    c2ws = np.stack([c.c2w for c in _ring(8, up, rolls)])
+    assert upright.angle(agreed_level(c2ws), up) < 3.0
+    assert upright_level(c2ws) is None  # no plane is held to them either
+
+
 def test_photos_looking_level_at_quarter_rolls_are_not_read_as_lying_down():
     # cameras at the object's height: any horizontal direction would turn every photo a quarter
     # (each up axis vertical); only the true up leaves their level axes spread round a plane
@@ -148,11 +158,11 @@ def test_photos_looking_level_at_quarter_rolls_are_not_read_as_lying_down():
     assert found is not None and upright.angle(found, up) < 1.0
 
 
-def _one_side_at_quarters() -> np.ndarray:
+def _one_side_at_quarters(rolls=(270.0, 270.0, 180.0, 90.0, 90.0, 270.0)) -> np.ndarray:
     """fruit_rolled/arc60x6@0's shape (N, 4, 4): six photos over 60 degrees of arc about +z,
-    looking down 37 degrees, most turned a quarter."""
+    looking down 37 degrees, at `rolls` (most turned a quarter)."""
     cams = []
-    for k, roll in enumerate((270.0, 270.0, 180.0, 90.0, 90.0, 270.0)):
+    for k, roll in enumerate(rolls):
         a = np.radians(12.0 * k)
         c2w = look_at(3.0 * np.array([np.cos(a), np.sin(a), np.tan(np.radians(37.0))]),
                       np.zeros(3), np.array([0.0, 0.0, 1.0]))
@@ -174,8 +184,9 @@ def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
 
 
 def test_photos_of_one_side_turned_by_quarters_agree_on_no_up():
-    # with no plane either: their level lies 55 deg off the true up, along the cameras' view
-    c2ws = _one_side_at_quarters()
+    # with no plane either: turned a quarter one way and the other in turn, their right axes
+    # agree on a level 55 deg off the true up, along the cameras' view
+    c2ws = _one_side_at_quarters((270.0, 90.0, 270.0, 90.0, 270.0, 90.0))
     level, spread = photos_level(c2ws)
     assert spread < LEVEL_SPREAD_DEG and upright.angle(level, [0.0, 0.0, 1.0]) > 30.0
     assert agreed_level(c2ws) is None

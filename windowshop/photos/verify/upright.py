@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from windowshop.photos.verify.types import Check, Hypothesis
-from windowshop.scene.cameras import nearest_point_to_axes, photos_level, upright_level
+from windowshop.scene.cameras import nearest_point_to_axes, photos_level, rolls, upright_level
 from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, covered_arc
 
 AGREE_DEG = 12.0  # a scene up further than this from the photos' agreed level fails the check
@@ -54,14 +54,6 @@ def angle(a: np.ndarray, b: np.ndarray) -> float:
     """Degrees between two directions (3,)."""
     cosine = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
     return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
-
-
-def rolls(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(N,) each camera's roll about the unit `up` (3,) in degrees: 0 when `up` points to the
-    top of its photo, 180 upside down; NaN for a camera looking within 20 degrees along it."""
-    x, y = c2ws[:, :3, 0] @ up, c2ws[:, :3, 1] @ up
-    roll = np.degrees(np.arctan2(x, y))
-    return np.where(np.hypot(x, y) >= np.sin(np.radians(20.0)), roll, np.nan)
 
 
 def _cameras_up(c2ws: np.ndarray) -> Check:

@@ -183,6 +183,19 @@ def test_photos_of_one_side_turned_by_quarters_do_not_outweigh_the_plane():
     assert upright.check(_located(cameras)) is None
 
 
+def test_photos_all_turned_sideways_outweigh_a_plane_off_their_level():
+    """temple's shape: seven photos over 86 degrees of a ring, each turned a quarter one way or
+    the other (their EXIF orientation lost): their up axes are level as upright photos' right
+    axes are, so a plane 82 degrees off (a face of the temple) fails."""
+    up = Rotation.from_euler("x", 82.0, degrees=True).as_matrix() @ [0.0, 0.0, 1.0]
+    rolls = np.resize([90.0, -90.0, 90.0, 90.0, -90.0], 25)
+    cameras = _ring(25, up, rolls)[:7]
+    found = upright_level(np.stack([c.c2w for c in cameras]))
+    assert found is not None and upright.angle(found[0], up) < 1.0
+    lying = upright.check(_located(cameras))  # the plane: the frame's +z
+    assert not lying.passed and "82.0 deg from the photos' own" in lying.detail
+
+
 def test_photos_of_one_side_turned_by_quarters_agree_on_no_up():
     # with no plane either: turned a quarter one way and the other in turn, their right axes
     # agree on a level 55 deg off the true up, along the cameras' view

@@ -134,6 +134,15 @@ QUARTER_REFINES = 6
 MAX_STEEP_DEG = 70.0  # an up the cameras look along more steeply than this (median) is no up
 QUARTER_KEEP = 0.9  # the share of photos whose level axes decide a quarter-turn up
 UPSIDE_DOWN_DEG = 135.0  # a photo rolled further than this about up is upside down
+# The up axes of photos all turned sideways must turn round their level this much (about 60
+# degrees of arc): upright photos over a narrow arc, misread as sideways about the arc's
+# tangent, turn theirs by 0.022-0.023 (a fruit and a dtu_skull subset, 80-88 deg off);
+# temple's sideways photos by 0.19-0.47 over 90 degrees or more
+SIDEWAYS_TURNED = 0.1
+# ... and the cameras keep their height about it within this (degrees, standard deviation), as
+# a walk round does: fruit's photos at random quarters, all sideways about a wrong level 55-58
+# deg off, swept 11-36 deg up and down about it; temple's 0.1-0.5
+SIDEWAYS_STEADY_DEG = 5.0
 
 
 def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
@@ -160,7 +169,9 @@ def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
 def upright_level(c2ws: np.ndarray) -> tuple[np.ndarray, float] | None:
     """(unit up (3,), spread in degrees) by the rule of photos held upright alone, photos_level's
     first: when their right axes agree on a level that they turn round, that the cameras do not
-    look along (MAX_STEEP_DEG) and that no photo is upside down about; else None.
+    look along (MAX_STEEP_DEG) and that no photo is upside down about; or, every photo turned
+    sideways (a walk shot so, its EXIF orientation lost: temple's), when their up axes do so;
+    else None.
 
     An up the cameras look along is level for photos at any roll. Photos of one side looking
     down at a table, most of them turned a quarter, have right axes (their true up axes) lying
@@ -171,10 +182,34 @@ def upright_level(c2ws: np.ndarray) -> tuple[np.ndarray, float] | None:
         return None
     up, spread, turned = _level_of(c2ws[:, :3, 0])
     up = _signed_by_ups(c2ws, up)
-    if (spread > LEVEL_SPREAD_DEG or turned <= TURNED or _steepness(c2ws, up) > MAX_STEEP_DEG
-            or not _held_upright(c2ws, up)):
-        return None
-    return up, spread
+    if _agreed_upright(c2ws, up, spread, turned) and _held_upright(c2ws, up):
+        return up, spread
+    # photos all turned sideways are upright ones turned a quarter: their up axes are as level
+    # (7 of temple's photos over 100 degrees, a face of the temple taken for the support 80-85
+    # deg off, were delivered lying on their side); which way each turned is not known, so up
+    # is signed by where the cameras stand
+    up, spread, turned = _level_of(c2ws[:, :3, 1])
+    up = up * _above_sign(c2ws, up)
+    elevations = np.degrees(np.arcsin(np.clip(-c2ws[:, :3, 2] @ up, -1.0, 1.0)))
+    if (turned > SIDEWAYS_TURNED and elevations.std() <= SIDEWAYS_STEADY_DEG
+            and _agreed_upright(c2ws, up, spread, turned) and _all_sideways(c2ws, up)):
+        return up, spread
+    return None
+
+
+def _agreed_upright(c2ws: np.ndarray, up: np.ndarray, spread: float, turned: float) -> bool:
+    """Whether level axes `spread` degrees off the unit `up` (3,) and turning round it by
+    `turned` (_level_of) agree on it, and the cameras do not look along it."""
+    return (spread <= LEVEL_SPREAD_DEG and turned > TURNED
+            and _steepness(c2ws, up) <= MAX_STEEP_DEG)
+
+
+def _all_sideways(c2ws: np.ndarray, up: np.ndarray) -> bool:
+    """Whether every photo is turned a quarter either way about the unit `up` (3,), within 45
+    degrees."""
+    turns = rolls(c2ws, up)
+    turns = turns[np.isfinite(turns)]
+    return len(turns) > 0 and bool(np.all(np.abs(np.abs(turns) - 90.0) < 45.0))
 
 
 def rolls(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -226,9 +226,11 @@ def _held_upright(c2ws: np.ndarray, up: np.ndarray) -> bool:
     says their EXIF orientation was lost, so they may be turned by quarters too, and the
     quarter rule decides. fruit's photos at random quarters (fruit_rolled/arc60x6@120: two
     upright, one upside down, two looking 80-83 deg along the level) agreed within 3.4 deg on
-    an up 59 deg off; the quarter rule found one 5 deg off. On the true poses of 748 random
-    subsets and arcs of eight captures, no upright capture's level changed and 8 rolled ones
-    came within 15 deg (bench/RESULTS.md, stop 50)."""
+    an up 59 deg off; the quarter rule found one 5 deg off. On the true poses of two draws of
+    random subsets and arcs of the captures (748 and 877), no upright capture's level changed;
+    on fruit's photos at random quarters the agreed level was over 15 deg off in 20 and 18
+    instead of 24 and 19, the upright rule's in none instead of 4 and 3 (bench/RESULTS.md,
+    stop 50)."""
     return not bool(np.any(np.abs(rolls(c2ws, up)) > UPSIDE_DOWN_DEG))
 
 

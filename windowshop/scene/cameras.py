@@ -190,8 +190,7 @@ def upright_level(c2ws: np.ndarray) -> tuple[np.ndarray, float] | None:
     # is signed by where the cameras stand
     up, spread, turned = _level_of(c2ws[:, :3, 1])
     up = up * _above_sign(c2ws, up)
-    elevations = np.degrees(np.arcsin(np.clip(-c2ws[:, :3, 2] @ up, -1.0, 1.0)))
-    if (turned > SIDEWAYS_TURNED and elevations.std() <= SIDEWAYS_STEADY_DEG
+    if (turned > SIDEWAYS_TURNED and _elevations(c2ws, up).std() <= SIDEWAYS_STEADY_DEG
             and _agreed_upright(c2ws, up, spread, turned) and _all_sideways(c2ws, up)):
         return up, spread
     return None
@@ -239,10 +238,15 @@ def _signed_by_ups(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
     return up if up @ c2ws[:, :3, 1].sum(0) >= 0 else -up
 
 
+def _elevations(c2ws: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(N,) degrees each camera looks up (positive) or down along the unit `up` (3,); with
+    `up` (3, S), (N, S) for each of S directions."""
+    return np.degrees(np.arcsin(np.clip(-c2ws[:, :3, 2] @ up, -1.0, 1.0)))
+
+
 def _steepness(c2ws: np.ndarray, up: np.ndarray) -> float:
     """The cameras' median elevation in degrees (its size) about the unit `up` (3,)."""
-    views = -c2ws[:, :3, 2]
-    return float(np.median(np.abs(np.degrees(np.arcsin(np.clip(views @ up, -1.0, 1.0))))))
+    return float(np.median(np.abs(_elevations(c2ws, up))))
 
 
 def _level_of(axes: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -268,7 +272,7 @@ def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
     elevation up and down as they go round. Only the QUARTER_KEEP share of photos nearest level
     decides the fit (a photo placed 40 degrees off tilted 12 rolled beer_can frames' up)."""
     seeds = _sphere(QUARTER_SEEDS)
-    rights, ups, views = c2ws[:, :3, 0], c2ws[:, :3, 1], -c2ws[:, :3, 2]
+    rights, ups = c2ws[:, :3, 0], c2ws[:, :3, 1]
     across, along = np.abs(rights @ seeds.T), np.abs(ups @ seeds.T)  # (N, S)
     nearer = across <= along
     off = np.minimum(across, along)  # sines of each photo's level axis off level
@@ -276,7 +280,7 @@ def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
     flatness = np.mean(np.sort(off, axis=0)[:kept] ** 2, axis=0)
     axes = np.where(nearer[..., None], rights[:, None], ups[:, None])  # (N, S, 3)
     turned = np.linalg.eigvalsh(np.einsum("nsi,nsj->sij", axes, axes) / len(c2ws))[:, 1]
-    elevations = np.degrees(np.arcsin(np.clip(views @ seeds.T, -1.0, 1.0)))  # (N, S)
+    elevations = _elevations(c2ws, seeds.T)  # (N, S)
     steadiness, steepness = elevations.std(axis=0), np.median(np.abs(elevations), axis=0)
     order = sorted(range(len(seeds)),
                    key=lambda k: _rank(flatness[k], turned[k], steadiness[k], steepness[k]))
@@ -285,7 +289,7 @@ def _quarter_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
         up = seed
         for _ in range(QUARTER_REFINES):
             up, spread, turned_up = _trimmed_level(_level_axes(c2ws, up), kept)
-        elevation = np.degrees(np.arcsin(np.clip(views @ up, -1.0, 1.0)))
+        elevation = _elevations(c2ws, up)
         refined.append((_rank(np.sin(np.radians(spread)) ** 2, turned_up, elevation.std(),
                               np.median(np.abs(elevation))), up, spread))
     _, up, spread = min(refined, key=lambda r: r[0])

@@ -157,11 +157,12 @@ def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
     what they look at."""
     rights = c2ws[:, :3, 0]
     up, spread, turned = _level_of(rights)
+    up = _signed_by_ups(c2ws, up)
     # right axes that do not turn (all along one line: photos from one spot, or every photo
     # turned a quarter, temple's) leave any direction across that line "level": not an answer
     if len(c2ws) < 3 or (spread <= LEVEL_SPREAD_DEG and turned > TURNED
-                         and _held_upright(c2ws, _signed_by_ups(c2ws, up))):
-        return _signed_by_ups(c2ws, up), spread
+                         and _held_upright(c2ws, up)):
+        return up, spread
     up, spread = _quarter_level(c2ws)
     return up * _above_sign(c2ws, up), spread
 

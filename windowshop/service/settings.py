@@ -12,6 +12,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from windowshop.config import PipelineConfig
 from windowshop.errors import UserError
+from windowshop.photos.ingest import MIN_PHOTOS
 
 
 class ServiceSettings(BaseSettings):
@@ -50,7 +51,7 @@ class ServiceSettings(BaseSettings):
     max_file_bytes: int = 200 * 2**20  # one file (a video or a zip may be large)
     max_upload_bytes: int = 500 * 2**20  # the whole request
     max_pixels: int = 40_000_000  # per image: larger ones are refused as decompression bombs
-    min_photos: int = 5  # fewer photos cannot be checked (photos/ingest.MIN_PHOTOS)
+    min_photos: int = MIN_PHOTOS  # fewer photos cannot be checked
     max_zip_entries: int = 2000
     max_unpacked_bytes: int = 1 * 2**30  # a zip's entries together, once unpacked
     max_video_seconds: float = 300.0

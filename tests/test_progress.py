@@ -64,3 +64,16 @@ def test_a_fit_piped_to_a_log_prints_plain_bounded_lines(tmp_path):
     fit_lines = [line for line in done.stderr.splitlines() if line.startswith("fit: ")]
     assert 1 <= len(fit_lines) <= 30  # 100 steps: a line every 5 s, not one per step
     assert fit_lines[-1].startswith("fit: 100/100 step (100%)")
+
+
+def test_a_prepare_stage_called_back_past_its_count_stops_full(capsys):
+    """The mapper calls back once per photo for every start it tries: the bar stops at the
+    photos' count instead of showing 10/4 (250%)."""
+    from windowshop.photos.progress import Stages
+
+    with Stages(show=True).stage("placing cameras", 4) as advance:
+        for _ in range(10):
+            advance(1)
+    shown = capsys.readouterr().err
+    assert "placing cameras: 4/4" in shown
+    assert not any(f"{n}/4" in shown for n in range(5, 11))

@@ -47,7 +47,32 @@ def test_retrieval_pairs_find_a_shuffled_walks_neighbours():
     neighbours = {tuple(sorted((int(position[i]), int(position[i + 1]))))
                   for i in range(count - 1)}
     assert len(neighbours & got) >= 0.95 * len(neighbours)
-    assert len(got) <= count * pairs.RETRIEVAL_K < count * (count - 1) / 2
+    assert len(got) <= count * (pairs.RETRIEVAL_K + pairs.SEQUENTIAL_OVERLAP) < count * (count - 1) / 2
+
+
+def test_photos_turned_by_quarters_keep_their_neighbours_in_file_order(tmp_path):
+    """fruit's photos turned 0/90/180/270 degrees in turn (EXIF orientation lost) are no walk to
+    their thumbnails, and retrieval by thumbnail alone pairs few of them with their next photo;
+    retrieval's pairs still hold each photo's next few in file order."""
+    from PIL import Image
+
+    images = sorted((DATA / "fruit" / "newfruit_small").glob("*.jpg"))[:48]
+    if not images:
+        pytest.skip("fruit is not in the shared data")
+    turned = []
+    for k, path in enumerate(images):
+        with Image.open(path) as image:
+            out = tmp_path / path.name
+            image.rotate(90 * (k % 4), expand=True).save(out)
+            turned.append(out)
+    descriptors = pairs.tiny_descriptors(turned)
+    assert pairs.choose(len(turned), descriptors) == "retrieval"
+    alike = pairs._most_alike(descriptors, pairs.RETRIEVAL_K)
+    by_thumbnail = sum(k + 1 in alike[k] or k in alike[k + 1] for k in range(len(turned) - 1))
+    assert by_thumbnail < 0.7 * (len(turned) - 1)
+    got = set(pairs.image_pairs(len(turned), "retrieval", descriptors))
+    assert all((k, j) in got for k in range(len(turned))
+               for j in range(k + 1, min(k + 1 + pairs.SEQUENTIAL_OVERLAP, len(turned))))
 
 
 def test_video_frames_in_order_are_a_walk():

@@ -47,9 +47,13 @@ class Stages:
         def advance(n: int = 1) -> None:
             nonlocal count
             count += n
-            bar.update(n)
-            if total:
-                self._report(self._done + share * min(count / total, 1.0))
+            if not total:
+                bar.update(n)
+                return
+            # the mapper calls back again for each start it tries, past the photos' count
+            # (fruit's 80 turned photos: "placing cameras: 456/80"): the bar stops when full
+            bar.update(min(count, total) - min(count - n, total))
+            self._report(self._done + share * min(count / total, 1.0))
 
         self._report(self._done)
         try:

@@ -72,6 +72,7 @@ from scipy.spatial import Delaunay
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_export import load_glb, supersampled  # noqa: E402
+from bench_isolation import iou  # noqa: E402
 from bench_real import captures, masked_psnr  # noqa: E402
 from provenance import machine  # noqa: E402
 from windowshop.config import ExportOptions, PipelineConfig  # noqa: E402
@@ -137,11 +138,10 @@ def refined_scores(run, scene, vertices, faces, uv, texture) -> dict:
         image, drawn = render_mesh(vertices, faces, camera, (1.0, 1.0, 1.0), uv=uv, texture=texture)
         seen = frame.opacity > 0.5
         rows.append((psnr(image[inside], truth[inside]), psnr(frame.rgb[inside], truth[inside]),
-                     (inside & drawn).sum() / max((inside | drawn).sum(), 1),
-                     (inside & seen).sum() / max((inside | seen).sum(), 1)))
-    glb, field, iou, field_iou = np.mean(np.array(rows, dtype=float), axis=0)
+                     iou(inside, drawn), iou(inside, seen)))
+    glb, field, glb_iou, field_iou = np.mean(np.array(rows, dtype=float), axis=0)
     return {"psnr_glb": round(glb, 2), "psnr_field": round(field, 2),
-            "gap_db": round(field - glb, 2), "iou": round(iou, 4), "field_iou": round(field_iou, 4)}
+            "gap_db": round(field - glb, 2), "iou": round(glb_iou, 4), "field_iou": round(field_iou, 4)}
 
 
 def field_silhouette_iou(run, scene) -> float:
@@ -150,7 +150,7 @@ def field_silhouette_iou(run, scene) -> float:
     for view in held_out_views(scene):
         inside = view.alpha > 0.5
         drawn = render_camera(run.model, view.camera, (1.0, 1.0, 1.0)).opacity > 0.5
-        ious.append(float((inside & drawn).sum() / max((inside | drawn).sum(), 1)))
+        ious.append(iou(inside, drawn))
     return float(np.mean(ious))
 
 
@@ -335,7 +335,7 @@ def evaluate(name: str, folder: Path, pictures: Path | None, export_seconds: flo
             x, y = shaded[inside].ravel(), truth[inside].ravel()
             gain = float(x @ y / max(x @ x, 1e-12))
             lit_scores[r].append(psnr(np.clip(shaded[inside] * gain, 0, 1), truth[inside]))
-        ious.append(float((inside & silhouette).sum() / max((inside | silhouette).sum(), 1)))
+        ious.append(iou(inside, silhouette))
         one_pixel.append(float(ndimage.binary_erosion(inside).sum() / max(inside.sum(), 1)))
     hull = covered_hull(run, scene)
     centres = vertices[faces].mean(1)

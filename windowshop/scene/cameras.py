@@ -335,13 +335,12 @@ def agreed_level(c2ws: np.ndarray) -> np.ndarray | None:
     if len(c2ws) < 3:
         return None
     up, spread = photos_level(c2ws)
-    turned = _level_of(_level_axes(c2ws, up))[2] > TURNED
     # an up the cameras look along is level for photos at any roll, so agreeing on it is no
     # evidence: fruit_rolled seed 1, arc60x6@0 (6 photos over 60 deg at quarter rolls, 7.7 deg
     # median error) agreed within 5.8 deg on an up they looked 82 deg along, 134 deg from the
     # true one. A steep capture with no support plane keeps the cameras' mean up instead.
-    steep = _steepness(c2ws, up) > MAX_STEEP_DEG
-    return up if spread <= LEVEL_SPREAD_DEG and turned and not steep else None
+    turned = _level_of(_level_axes(c2ws, up))[2]
+    return up if _agreed_upright(c2ws, up, spread, turned) else None
 
 
 def box_corners(aabb) -> np.ndarray:

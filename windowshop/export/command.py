@@ -19,13 +19,14 @@
                          and the orbit a viewer may take: the covered arc (orbit)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
-`windowshop video` calls `export_models` to write GLB and USDZ from one asset.
+`windowshop video` calls `export_models` to write GLB and USDZ from one asset, side by side.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -70,8 +71,8 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
     from windowshop.export.carve import CARVE_VIEWS, ESTIMATED, TOLERANCE, carve_volume
     from windowshop.export.frame import Z_UP_TO_Y_UP, apply, model_frame
     from windowshop.export.level import choose_level
-    from windowshop.export.mesh import (Mesh, lattice_resolution, neighbour_angles, object_mesh,
-                                        sample_volume, taubin, vertex_normals)
+    from windowshop.export.mesh import (Mesh, face_pairs, lattice_resolution, neighbour_angles,
+                                        object_mesh, sample_volume, taubin, vertex_normals)
     from windowshop.export.support import flatten_base, plane_found, prepared_report
     from windowshop.export.unseen import held_to_covered, weight_at
     from windowshop.export.orbit import covered_orbit
@@ -120,7 +121,13 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
         mesh = settle(mesh, photos, cell)
         lap("settle")
     depths = tuple(d * cell for d in BAKE_DEPTHS)
-    angles = {}  # mean angle between neighbouring faces (degrees): how rough the surface is
+    # mean angle between neighbouring faces (degrees): how rough the surface is; the vertices
+    # move from here on, the faces stay
+    angles, pairs = {}, face_pairs(mesh.faces)
+
+    def mean_angle(mesh: Mesh) -> float:
+        return round(float(neighbour_angles(mesh, pairs).mean()), 2)
+
     uv = texture = None
     fade = None if unseen is None or not unseen.any() else (
         lambda points: weight_at(unseen, aabb, points))  # the unseen side's colour fades to grey
@@ -131,9 +138,9 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
                                unseen=fade)
         lap("bake")
         if every_photo is not None and options.tune:
-            angles["before tune"] = round(float(neighbour_angles(mesh).mean()), 2)
+            angles["before tune"] = mean_angle(mesh)
             mesh = tune_surface(mesh, unwrapped.uv[unwrapped.faces], image, every_photo, cell)
-            angles["tuned"] = round(float(neighbour_angles(mesh).mean()), 2)
+            angles["tuned"] = mean_angle(mesh)
             mesh = taubin(mesh, options.smooth)
             if cut is not None:
                 mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
@@ -172,7 +179,7 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             "photos": 0 if photos is None else len(photos.cameras),
             "unseen_share": round(unseen_share, 4), "support_cut": cut is not None,
             "support_plane": plane_found(prepared),
-            "neighbour_angle": {**angles, "delivered": round(float(neighbour_angles(mesh).mean()), 2)},
+            "neighbour_angle": {**angles, "delivered": mean_angle(mesh)},
             "orbit": orbit, "seconds": seconds}
     return Asset(vertices=apply(frame.to_model, vertices).astype(np.float32), faces=faces,
                  normals=(normals @ Z_UP_TO_Y_UP.T).astype(np.float32),
@@ -242,8 +249,13 @@ def export_models(run_dir: str | Path, paths: list[Path], options: ExportOptions
     if set(formats) == {"ply"}:
         options = replace(options, texture=0)  # PLY holds vertex colours only
     asset = build_asset(run_dir, options, device, vertex_colours="ply" in formats)
-    for path, fmt in zip(paths, formats):
-        write_asset(asset, Path(path), fmt)
+    # each format in a thread of its own: most of a write is its texture's PNG encoding, which
+    # Pillow does without the GIL (dtu_skull's GLB and USDZ: 0.33-0.41 s together, 0.60-0.98 s
+    # one after the other, ordinary profile)
+    with ThreadPoolExecutor(max_workers=len(paths) or 1) as pool:
+        for done in [pool.submit(write_asset, asset, Path(path), fmt)
+                     for path, fmt in zip(paths, formats)]:
+            done.result()  # a write's error, raised here
     return asset
 
 

@@ -178,18 +178,24 @@ def object_mesh(volume: torch.Tensor, level: float, aabb: np.ndarray, triangles:
     return decimate(keep_largest(mesh, keep_share), triangles)
 
 
-def neighbour_angles(mesh: Mesh) -> np.ndarray:
-    """(E,) degrees between the normals of the two faces across each edge they share."""
-    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
-    normals = np.cross(b - a, c - a)
-    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-20)
-    f = mesh.faces
-    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    owner = np.tile(np.arange(len(f)), 3)
+def face_pairs(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) the two faces across each edge that `faces` (F, 3) share."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(faces)), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
     edges, owner = edges[order], owner[order]
     pair = np.flatnonzero((edges[1:] == edges[:-1]).all(1))  # an edge's two faces, side by side
-    cos = np.einsum("ij,ij->i", normals[owner[pair]], normals[owner[pair + 1]])
+    return np.stack([owner[pair], owner[pair + 1]], 1)
+
+
+def neighbour_angles(mesh: Mesh, pairs: np.ndarray | None = None) -> np.ndarray:
+    """(E,) degrees between the normals of the two faces across each edge they share
+    (`pairs`: face_pairs(mesh.faces), passed where one set of faces is measured again)."""
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    normals = np.cross(b - a, c - a)
+    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-20)
+    pairs = face_pairs(mesh.faces) if pairs is None else pairs
+    cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 

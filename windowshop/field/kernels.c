@@ -497,6 +497,20 @@ void composite_rays_backward(i64 X, i64 Y, i64 Z, i64 C, const float *origins, c
     trilinear_backward(points, N, X, Y, Z, C, grad_samples, accum, touched);
 }
 
+/* The first and last rows (out[0], out[1]) of an image H rows high whose pixel centres the
+ * triangle of vertex indices `v` (3) may cover; none (out[0] > out[1]) where a corner
+ * is nearer than `near`. */
+static inline void face_rows(const double *xy, const double *depth, const i64 *v, i64 H,
+                             double near, i64 out[2]) {
+    out[0] = 0;
+    out[1] = -1;
+    if (!(depth[v[0]] > near && depth[v[1]] > near && depth[v[2]] > near)) return;
+    double ay = xy[2 * v[0] + 1], by = xy[2 * v[1] + 1], cy = xy[2 * v[2] + 1];
+    double ly = fmin(ay, fmin(by, cy)), hy = fmax(ay, fmax(by, cy));
+    out[0] = (i64)fmax(0.0, ceil(ly - 0.5));
+    out[1] = (i64)fmin((double)(H - 1), floor(hy - 0.5));
+}
+
 /* The nearest of the triangles `faces` (F, 3) at each pixel centre of a W x H image: `face`
  * (H*W) gets its index (-1 where none), `zbuf` (H*W) its depth. `xy` (V, 2) are the vertices'
  * pixel coordinates (centres at +0.5), `depth` (V,) their depths along the view; triangles with
@@ -511,6 +525,13 @@ void rasterise_faces(const double *xy, const double *depth, const i64 *faces, i6
     bands = omp_get_max_threads();
 #endif
     if (bands > H) bands = H > 0 ? H : 1;
+    /* each face's rows of pixel centres, found once: a band then skips the faces outside it
+     * reading two numbers, not nine (without the memory, each band finds them itself) */
+    i64 *rows = malloc(2 * (F > 0 ? F : 1) * sizeof(i64));
+    if (rows) {
+#pragma omp parallel for schedule(static) if (bands > 1)
+        for (i64 f = 0; f < F; ++f) face_rows(xy, depth, faces + 3 * f, H, near, rows + 2 * f);
+    }
 #pragma omp parallel for schedule(static, 1) if (bands > 1)
     for (i64 b = 0; b < bands; ++b) {
         i64 r0 = b * H / bands, r1 = (b + 1) * H / bands;  /* rows [r0, r1) */
@@ -519,15 +540,15 @@ void rasterise_faces(const double *xy, const double *depth, const i64 *faces, i6
             face[i] = -1;
         }
         for (i64 f = 0; f < F; ++f) {
+            i64 own[2];
+            const i64 *span = rows ? rows + 2 * f : own;
+            if (!rows) face_rows(xy, depth, faces + 3 * f, H, near, own);
+            i64 y0 = span[0] > r0 ? span[0] : r0, y1 = span[1] < r1 - 1 ? span[1] : r1 - 1;
+            if (y0 > y1) continue;
             const i64 *v = faces + 3 * f;
             double ax = xy[2 * v[0]], ay = xy[2 * v[0] + 1], da = depth[v[0]];
             double bx = xy[2 * v[1]], by = xy[2 * v[1] + 1], db = depth[v[1]];
             double cx = xy[2 * v[2]], cy = xy[2 * v[2] + 1], dc = depth[v[2]];
-            if (!(da > near && db > near && dc > near)) continue;
-            double ly = fmin(ay, fmin(by, cy)), hy = fmax(ay, fmax(by, cy));
-            i64 y0 = (i64)fmax((double)r0, ceil(ly - 0.5));
-            i64 y1 = (i64)fmin((double)(r1 - 1), floor(hy - 0.5));
-            if (y0 > y1) continue;
             double area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
             if (fabs(area) < 1e-12) area = 1e-12;
             double lx = fmin(ax, fmin(bx, cx)), hx = fmax(ax, fmax(bx, cx));
@@ -536,10 +557,15 @@ void rasterise_faces(const double *xy, const double *depth, const i64 *faces, i6
                 double py = (double)y + 0.5;
                 for (i64 x = x0; x <= x1; ++x) {
                     double px = (double)x + 0.5;
-                    double w0 = ((cx - bx) * (py - by) - (cy - by) * (px - bx)) / area;
-                    double w1 = ((ax - cx) * (py - cy) - (ay - cy) * (px - cx)) / area;
-                    double w2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / area;
-                    if (!((w0 >= 0 && w1 >= 0 && w2 >= 0) || (w0 <= 0 && w1 <= 0 && w2 <= 0))) continue;
+                    double e0 = (cx - bx) * (py - by) - (cy - by) * (px - bx);
+                    double e1 = (ax - cx) * (py - cy) - (ay - cy) * (px - cx);
+                    double e2 = (bx - ax) * (py - ay) - (by - ay) * (px - ax);
+                    /* the weights e / area share their signs with e (area is never 0), so the
+                     * inside test needs no division (most pixels of a face's box are outside);
+                     * bitwise, it is one branch a pixel, not up to six mispredicted ones */
+                    int inside = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0));
+                    if (!inside) continue;
+                    double w0 = e0 / area, w1 = e1 / area, w2 = e2 / area;
                     double inv = w0 / da + w1 / db + w2 / dc;
                     double z = 1.0 / (inv > 1e-12 ? inv : 1e-12);
                     i64 i = y * W + x;
@@ -551,4 +577,5 @@ void rasterise_faces(const double *xy, const double *depth, const i64 *faces, i6
             }
         }
     }
+    free(rows);
 }

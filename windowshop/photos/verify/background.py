@@ -29,17 +29,7 @@ from windowshop.photos.verify.types import Check, Hypothesis
 MIN_INLIERS = 30  # a pair with fewer verified matches says little about where they lie
 NEAR_DEG = 30.0  # the model turns the two cameras by at most this: side by side
 LINKED = 0.1  # a pair with this share of its matches on the background links its photos ...
-OBJECT_ONLY = 0.02  # ... and one placed side by side with at most this share contradicts,
-# as does one with at most CHANCE matches off the object making at most FEW of its matches: a
-# handful of chance matches on a repeating floor (tiles) that pass the epipolar test by luck.
-# With the focal length known (`--intrinsics`, or a phone's EXIF), verification keeps 1-5 such
-# matches in each pair across the fold of the 8 beer_can frames below (shares 0.009-0.04; at
-# the default prior 0-3), where true neighbours share 15-50. Right models' pairs placed side by
-# side with as few (bench_verify, seed 0): dtu_skull's 6 photos over 60 degrees 2 of 10, its 49
-# all round 9 of 68, beer_can's 70 frames 19 of 181 (bench/RESULTS.md, stop 52). At 3 matches
-# and 0.03 one of the two folds is seen; without FEW, 4 matches fail dtu_skull's 49 (14 of 68)
-CHANCE = 4
-FEW = 0.04
+OBJECT_ONLY = 0.02  # ... and one placed side by side with at most this share contradicts
 MIN_LINKED = 2  # fewer linked pairs: the background's texture is not shown, no check
 # The model fails with MIN_CONFLICTS or more such pairs making more than MAX_SHARE of the pairs
 # it places side by side, both photos of each pair with a background shown to match. Measured
@@ -105,13 +95,7 @@ def fold_pairs(hypothesis: Hypothesis) -> list[tuple[str, str]]:
     found = side_by_side(shares)
     if found is None or len(found[0]) < MIN_CONFLICTS:
         return []
-    return [(a, b) for a, b, inliers, _, share in shares if object_only(inliers, share)]
-
-
-def object_only(inliers: int, share: float) -> bool:
-    """Whether a pair of `inliers` verified matches, `share` of them off the object, matches
-    only on the object (OBJECT_ONLY, CHANCE, FEW)."""
-    return share <= OBJECT_ONLY or (round(share * inliers) <= CHANCE and share <= FEW)
+    return [(a, b) for a, b, _, _, share in shares if share <= OBJECT_ONLY]
 
 
 def side_by_side(shares: list[tuple[str, str, int, float, float]]
@@ -128,7 +112,7 @@ def side_by_side(shares: list[tuple[str, str, int, float, float]]
     near = [s for s in strong if s[3] <= NEAR_DEG and {s[0], s[1]} <= textured]
     if sum(1 for *_, share in near if share >= LINKED) < MIN_LINKED:
         return None
-    conflicts = [(a, b) for a, b, inliers, _, share in near if object_only(inliers, share)]
+    conflicts = [(a, b) for a, b, _, _, share in near if share <= OBJECT_ONLY]
     return conflicts, len(near), sum(1 for *_, share in strong if share >= LINKED)
 
 

@@ -11,6 +11,15 @@ matches all lie on the object is a contradiction (Heinly et al. 2014: the confli
 observations of a wrongly merged model). A plain backdrop (a product on white) matches nothing
 either way, and the check does not apply.
 
+A match off the object shows that two photos see one background only where the model's poses
+explain it: the point where its two rays meet lies in front of both cameras and projects within
+MAX_ERROR_PX of both keypoints. A repeated texture behind the object, a tiled floor, gives the
+pairs across a fold a few chance matches that fit the pair's own two-view geometry but not the
+model's poses, which a fold bends to fit its other pairs (beer_can's folded 8 frames with the
+focal length known: 1-5 such matches a pair, shares 0.01-0.05 of its inliers, their rays passing
+0.02-0.4 of the object's distance apart, where the true neighbours' pass 0.001-0.005 apart). A
+pair's link to the background (LINKED) counts every match off the object.
+
 No photo is blamed: which side of a fold is the true one, the matches cannot say (leaving out
 either side of 8 beer_can frames kept a photo placed 90 degrees off). Those pairs are pruned
 from the matches and the photos mapped again (windowshop.photos.hypotheses), else the capture
@@ -27,6 +36,7 @@ from windowshop.photos.verify.pairs import ALIKE
 from windowshop.photos.verify.types import Check, Hypothesis
 
 MIN_INLIERS = 30  # a pair with fewer verified matches says little about where they lie
+MAX_ERROR_PX = 4.0  # a match the poses explain (COLMAP's mapper keeps points within 4 px)
 NEAR_DEG = 30.0  # the model turns the two cameras by at most this: side by side
 LINKED = 0.1  # a pair with this share of its matches on the background links its photos ...
 OBJECT_ONLY = 0.02  # ... and one placed side by side with at most this share contradicts
@@ -43,14 +53,16 @@ MAX_SHARE = 0.2
 
 
 def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
-                      ) -> list[tuple[str, str, int, float, float]]:
+                      ) -> list[tuple[str, str, int, float, float, float]]:
     """(image name, image name, inliers, degrees the model turns between them, share of the
-    inliers off the object in both photos) for every verified pair of placed, masked photos
-    with at least `min_inliers`."""
+    inliers off the object in both photos, share of the inliers off the object that the model's
+    poses explain) for every verified pair of placed, masked photos with at least
+    `min_inliers`. The poses of photos the ring placed (windowshop.photos.fill) are a guess, and
+    their matches count as explained."""
     found, sfm = hypothesis.found, hypothesis.sfm
     photos = {p.image_name: p for p in found.photos if p.name in found.masks}
-    rotations = {im.name: im.cam_from_world().rotation.matrix()
-                 for im in sfm.reconstruction.images.values() if im.has_pose}
+    images = {im.name: im for im in sfm.reconstruction.images.values() if im.has_pose}
+    rotations = {name: im.cam_from_world().rotation.matrix() for name, im in images.items()}
     out = []
     with pycolmap.Database.open(sfm.database) as db:
         names = {im.image_id: im.name for im in db.read_all_images()}
@@ -67,9 +79,41 @@ def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
                     keypoints[i] = db.read_keypoints(i)[:, :2]
             behind = (_off_object(keypoints[first][matches[:, 0]], photos[a], found)
                       & _off_object(keypoints[second][matches[:, 1]], photos[b], found))
+            explained = behind.copy()
+            if not {a, b} & set(sfm.guessed):
+                explained[behind] = _explained(
+                    images[a], images[b], keypoints[first][matches[behind, 0]],
+                    keypoints[second][matches[behind, 1]])
             turned = rotation_angle(rotations[b] @ rotations[a].T)
-            out.append((a, b, len(matches), turned, float(behind.mean())))
+            out.append((a, b, len(matches), turned, float(behind.mean()),
+                        float(explained.mean())))
     return out
+
+
+def _explained(first: pycolmap.Image, second: pycolmap.Image, pixels: np.ndarray,
+               others: np.ndarray) -> np.ndarray:
+    """(K,) whether the poses of `first` and `second` explain each match of their keypoints at
+    `pixels` and `others` (K, 2): the midpoint of the closest approach of the two rays lies in
+    front of both cameras and projects within MAX_ERROR_PX of both keypoints."""
+    centres, rays = [], []
+    for image, at in ((first, pixels), (second, others)):
+        ray = np.c_[image.camera.cam_from_img(at), np.ones(len(at))]
+        ray = ray @ image.cam_from_world().rotation.matrix()  # to world axes
+        centres.append(image.projection_center())
+        rays.append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
+    across = centres[0] - centres[1]
+    cos = (rays[0] * rays[1]).sum(1)
+    along0, along1 = rays[0] @ across, rays[1] @ across
+    apart = np.maximum(1.0 - cos ** 2, 1e-12)  # parallel rays: a point far off along them
+    point = (centres[0] + ((cos * along1 - along0) / apart)[:, None] * rays[0]
+             + centres[1] + ((along1 - cos * along0) / apart)[:, None] * rays[1]) / 2
+    explained = np.ones(len(point), bool)
+    for image, at in ((first, pixels), (second, others)):
+        pose = image.cam_from_world()
+        local = point @ pose.rotation.matrix().T + pose.translation
+        projected = image.camera.img_from_cam(local, False)
+        explained &= (local[:, 2] > 0) & (np.linalg.norm(projected - at, axis=1) <= MAX_ERROR_PX)
+    return explained
 
 
 def _off_object(points: np.ndarray, photo, found) -> np.ndarray:
@@ -95,25 +139,25 @@ def fold_pairs(hypothesis: Hypothesis) -> list[tuple[str, str]]:
     found = side_by_side(shares)
     if found is None or len(found[0]) < MIN_CONFLICTS:
         return []
-    return [(a, b) for a, b, _, _, share in shares if share <= OBJECT_ONLY]
+    return [(a, b) for a, b, _, _, share, _ in shares if share <= OBJECT_ONLY]
 
 
-def side_by_side(shares: list[tuple[str, str, int, float, float]]
+def side_by_side(shares: list[tuple[str, str, int, float, float, float]]
                  ) -> tuple[list[tuple[str, str]], int, int] | None:
     """Of `shares` (background_shares): (the pairs placed side by side whose MIN_INLIERS or
-    more matches lie only on the object, how many pairs are placed side by side, how many pairs
-    match the background), counting only pairs of photos whose background some pair of theirs
-    matches; or None where the check does not apply (a background shown to match by fewer than
-    MIN_LINKED pairs placed side by side)."""
+    more matches lie only on the object, save those the model's poses do not explain, how many
+    pairs are placed side by side, how many pairs match the background), counting only pairs of
+    photos whose background some pair of theirs matches; or None where the check does not apply
+    (a background shown to match by fewer than MIN_LINKED pairs placed side by side)."""
     # photos whose background is shown to match: LINKED of some pair's matches off the object
     # (a photo against a dark or plain backdrop matches only on the object with every neighbour)
     strong = [s for s in shares if s[2] >= MIN_INLIERS]
-    textured = {n for a, b, _, _, share in strong if share >= LINKED for n in (a, b)}
+    textured = {n for a, b, _, _, share, _ in strong if share >= LINKED for n in (a, b)}
     near = [s for s in strong if s[3] <= NEAR_DEG and {s[0], s[1]} <= textured]
-    if sum(1 for *_, share in near if share >= LINKED) < MIN_LINKED:
+    if sum(1 for *_, share, _ in near if share >= LINKED) < MIN_LINKED:
         return None
-    conflicts = [(a, b) for a, b, _, _, share in near if share <= OBJECT_ONLY]
-    return conflicts, len(near), sum(1 for *_, share in strong if share >= LINKED)
+    conflicts = [(a, b) for a, b, _, _, _, explained in near if explained <= OBJECT_ONLY]
+    return conflicts, len(near), sum(1 for *_, share, _ in strong if share >= LINKED)
 
 
 def _applies(hypothesis: Hypothesis) -> bool:

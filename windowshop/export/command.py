@@ -19,14 +19,13 @@
                          and the orbit a viewer may take: the covered arc (orbit)
     write_asset(asset, path)  -> GLB / USDZ / PLY, and FILE.json beside it (frame.write_side_file)
 
-`windowshop video` calls `export_models` to write GLB and USDZ from one asset, side by side.
+`windowshop video` calls `export_models` to write GLB and USDZ from one asset.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -249,13 +248,12 @@ def export_models(run_dir: str | Path, paths: list[Path], options: ExportOptions
     if set(formats) == {"ply"}:
         options = replace(options, texture=0)  # PLY holds vertex colours only
     asset = build_asset(run_dir, options, device, vertex_colours="ply" in formats)
-    # each format in a thread of its own: most of a write is its texture's PNG encoding, which
-    # Pillow does without the GIL (dtu_skull's GLB and USDZ: 0.33-0.41 s together, 0.60-0.98 s
-    # one after the other, ordinary profile)
-    with ThreadPoolExecutor(max_workers=len(paths) or 1) as pool:
-        for done in [pool.submit(write_asset, asset, Path(path), fmt)
-                     for path, fmt in zip(paths, formats)]:
-            done.result()  # a write's error, raised here
+    # one format after the other: written side by side in threads (0.3-0.5 s saved), one run of
+    # bench_real in seven hung with its main thread waiting on a lock; those threads, importing
+    # trimesh and usd-core's pxr (C++ plugins, a thread pool of its own) at once, were the
+    # likeliest cause (bench/RESULTS.md, stop 53)
+    for path, fmt in zip(paths, formats):
+        write_asset(asset, Path(path), fmt)
     return asset
 
 

@@ -61,12 +61,14 @@ def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
     """(image name, image name, inliers, degrees the model turns between them, share of the
     inliers off the object in both photos, share of the inliers off the object that the model's
     poses explain) for every verified pair of placed, masked photos with at least
-    `min_inliers`. The poses of photos the ring placed (windowshop.photos.fill) are a guess, and
-    their matches count as explained."""
+    `min_inliers`. Only pairs placed side by side (NEAR_DEG), which side_by_side reads, are put
+    to the poses; the poses of photos the ring placed (windowshop.photos.fill) are a guess. The
+    others' matches off the object all count as explained."""
     found, sfm = hypothesis.found, hypothesis.sfm
     photos = {p.image_name: p for p in found.photos if p.name in found.masks}
     images = {im.name: im for im in sfm.reconstruction.images.values() if im.has_pose}
     rotations = {name: im.cam_from_world().rotation.matrix() for name, im in images.items()}
+    guessed = set(sfm.guessed)
     out = []
     with pycolmap.Database.open(sfm.database) as db:
         names = {im.image_id: im.name for im in db.read_all_images()}
@@ -83,12 +85,12 @@ def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
                     keypoints[i] = db.read_keypoints(i)[:, :2]
             behind = (_off_object(keypoints[first][matches[:, 0]], photos[a], found)
                       & _off_object(keypoints[second][matches[:, 1]], photos[b], found))
+            turned = rotation_angle(rotations[b] @ rotations[a].T)
             explained = behind.copy()
-            if not {a, b} & set(sfm.guessed):
+            if turned <= NEAR_DEG and not {a, b} & guessed:
                 explained[behind] = _explained(
                     images[a], images[b], keypoints[first][matches[behind, 0]],
                     keypoints[second][matches[behind, 1]])
-            turned = rotation_angle(rotations[b] @ rotations[a].T)
             out.append((a, b, len(matches), turned, float(behind.mean()),
                         float(explained.mean())))
     return out

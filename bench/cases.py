@@ -1,9 +1,11 @@
 """Build the captures with known answers that the shared data lacks, for bench_verify's `--extra`,
 each as a folder with images/ and a ground-truth transforms.json (one JSON line per case).
 
-    python bench/cases.py OUT [--only doppelganger,granite,skull_up,fruit_rolled] [--seed 0]
+    python bench/cases.py OUT [--only doppelganger,granite,skull_up,fruit_rolled,fruit_mixed]
+                             [--seed 0]
     python bench/bench_verify.py --extra doppelganger=OUT/doppelganger --extra granite=OUT/granite \
-        --extra skull_up=OUT/skull_up --extra fruit_rolled=OUT/fruit_rolled
+        --extra skull_up=OUT/skull_up --extra fruit_rolled=OUT/fruit_rolled \
+        --extra fruit_mixed=OUT/fruit_mixed
 
   doppelganger  a carton whose opposite sides carry one print, on pure white, 40 photos all
                 round (windowshop.scene.products.doppelganger_box): incremental structure from
@@ -13,10 +15,14 @@ each as a folder with images/ and a ground-truth transforms.json (one JSON line 
   skull_up      every third dtu_skull photo (17) pitched up 5 degrees (products.turned): a
                 capture looking up, with no support plane in view of most photos;
   fruit_rolled  every fruit photo (81) rolled by quarters in turn, 0/90/180/270 degrees (the
-                phone held every way), with each frame's gravity: the up vector's case.
+                phone held every way), with each frame's gravity: the up vector's case;
+  fruit_mixed   every fruit photo (81), every other one given in landscape: the whole frame
+                turned a quarter (sizes swapped), its camera turned alike, with each frame's
+                gravity: one lens in two shapes (windowshop.photos.orient).
 The same on every run; `--seed K` (K > 0) gives other captures of the same kind, to check that
 an outcome is not one seed's: the rendered cases' cameras, jitter and prints drawn from K,
-skull_up every third photo from photo K mod 3, fruit_rolled each photo's quarter drawn at random.
+skull_up every third photo from photo K mod 3, fruit_rolled each photo's quarter drawn at random,
+fruit_mixed each photo's shape.
 The turned cases read ../shared/data in place.
 """
 
@@ -25,11 +31,15 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
+from windowshop.photos import orient
 from windowshop.scene import products, read_source
+from windowshop.scene.cameras import up_vector
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -46,11 +56,34 @@ def fruit_rolled(out: Path, seed: int) -> Path:
     return products.turned(frames, out, list(90.0 * quarters))
 
 
+def fruit_mixed(out: Path, seed: int) -> Path:
+    frames = read_source(DATA / "fruit").frames
+    turn = (np.arange(len(frames)) % 2 == 1 if seed == 0
+            else np.random.default_rng(seed).integers(0, 2, len(frames)) == 1)
+    up = up_vector(np.stack([f.camera.c2w for f in frames]), "level")
+    cameras, images, extras = [], [], []
+    for frame, turned in zip(frames, turn):
+        camera = frame.camera
+        with Image.open(frame.image_path) as image:
+            pixels = np.asarray(image.convert("RGB").resize((camera.width, camera.height)))
+        if turned:  # np.rot90 puts (u, v) at (v, W - u): the image's right is the camera's down
+            pixels = np.ascontiguousarray(np.rot90(pixels, 1))
+            camera = replace(camera, c2w=orient.sfm_c2w(camera.c2w), fx=camera.fy, fy=camera.fx,
+                             cx=camera.cy, cy=camera.width - camera.cx, width=camera.height,
+                             height=camera.width)
+        cameras.append(camera)
+        images.append(pixels)
+        extras.append({"gravity": (camera.c2w[:3, :3].T @ -up).tolist()})
+    names = [Path(f.image_path).stem for f in frames]
+    return products.write_capture(out, cameras, images, None, names, extra=extras)
+
+
 BUILDERS = {
     "doppelganger": lambda out, seed: products.doppelganger_box(out, 40, (640, 480), seed),
     "granite": lambda out, seed: products.figure_on_granite(out, 20, (640, 480), seed),
     "skull_up": skull_up,
     "fruit_rolled": fruit_rolled,
+    "fruit_mixed": fruit_mixed,
 }
 
 

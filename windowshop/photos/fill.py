@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from windowshop.photos import orient
 from windowshop.photos.align import rotation_angle
 from windowshop.photos.output import posed_photos
 from windowshop.photos.ring import MIN_PLACED, Ring, fit_ring, guess_poses
@@ -192,10 +193,11 @@ def _camera(model: pycolmap.Reconstruction, db: pycolmap.Database, image_id: int
 
 
 def fill(model: pycolmap.Reconstruction, database: Path, names: list[str], seed: int,
-         guess: bool = True) -> Filled:
+         guess: bool = True, turned: frozenset[str] = frozenset()) -> Filled:
     """Place the images of `names` (shooting order) that `model` lacks: by PnP, else from a
     placed neighbour and the ring, else (when `guess`) on the ring by shooting order (see the
-    module docstring). Nothing happens with fewer than MIN_PLACED placed."""
+    module docstring). Nothing happens with fewer than MIN_PLACED placed. A guess for one of the
+    `turned` images (windowshop.photos.orient) is turned with it."""
     placed = {p.image_name: p.camera.c2w for p in posed_photos(model)}
     filled = Filled()
     if len(placed) < MIN_PLACED or len(placed) == len(names):
@@ -226,5 +228,7 @@ def fill(model: pycolmap.Reconstruction, database: Path, names: list[str], seed:
             guesses = guess_poses(known, len(names))
             for name in rest:
                 filled.guessed.append(name)
-                _add(model, db, ids[name], _cam_from_world(guesses[names.index(name)]))
+                c2w = guesses[names.index(name)]
+                _add(model, db, ids[name],
+                     _cam_from_world(orient.sfm_c2w(c2w) if name in turned else c2w))
     return filled

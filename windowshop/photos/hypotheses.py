@@ -141,7 +141,7 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
         options = pycolmap.GlobalPipelineOptions()
         options.random_seed = search.settings.seed
         if search.gravity:  # rotation averaging held to the phone's gravity (Pan et al. 2024)
-            sfm_.write_gravity(database, search.gravity)
+            sfm_.write_gravity(database, search.gravity, search.settings.turned)
             options.mapper.rotation_averaging.use_gravity = True
         models = pycolmap.global_mapping(database, search.image_dir, out, options)
         model = max(models.values(), key=lambda r: r.num_reg_images()) if models else None
@@ -156,7 +156,7 @@ def _remapped(search: Search, best: Hypothesis, label: str, database: Path, mapp
     return sfm_.SfmResult(reconstruction=model, placed=placed,
                           unplaced=sorted(set(search.names) - set(placed)),
                           keypoints=best.sfm.keypoints,  # the same features, matched again
-                          database=search.evidence)
+                          database=search.evidence, turned=best.sfm.turned)
 
 
 # the checks that say a model's geometry is wrong where its pairs need not contradict it

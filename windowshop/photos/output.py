@@ -16,6 +16,7 @@ import numpy as np
 import pycolmap
 from PIL import Image
 
+from windowshop.photos import orient
 from windowshop.scene.cameras import opencv_w2c_to_gl_c2w
 from windowshop.scene.nerfstudio import WRITER_KEY
 from windowshop.scene.types import Camera
@@ -34,8 +35,10 @@ class PosedPhoto:
     distortion: dict[str, float]  # OpenCV terms (k1, k2), empty for a pinhole
 
 
-def posed_photos(reconstruction: pycolmap.Reconstruction) -> list[PosedPhoto]:
-    """The placed images of a COLMAP model as OpenGL cameras, sorted by name."""
+def posed_photos(reconstruction: pycolmap.Reconstruction,
+                 turned: frozenset[str] = frozenset()) -> list[PosedPhoto]:
+    """The placed images of a COLMAP model as OpenGL cameras, sorted by name; those of the
+    `turned` images are the cameras of the photos as taken (windowshop.photos.orient)."""
     out = []
     for image in sorted(reconstruction.images.values(), key=lambda im: im.name):
         if not image.has_pose:
@@ -45,6 +48,8 @@ def posed_photos(reconstruction: pycolmap.Reconstruction) -> list[PosedPhoto]:
         c2w = opencv_w2c_to_gl_c2w(pose.rotation.matrix(), pose.translation, image.name)
         camera = Camera(fx=cam.focal_length_x, fy=cam.focal_length_y, cx=cam.principal_point_x,
                         cy=cam.principal_point_y, width=cam.width, height=cam.height, c2w=c2w)
+        if image.name in turned:
+            camera = orient.photo_camera(camera)
         keys = RADIAL_MODELS.get(cam.model_name, ())
         distortion = {k: float(v) for k, v in zip(keys, list(cam.params)[3:])}
         out.append(PosedPhoto(Path(image.name).stem, image.name, camera, distortion))

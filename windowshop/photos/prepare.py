@@ -29,7 +29,7 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
-                               segment, sensors)
+                               orient, segment, sensors)
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
 from windowshop.photos.located import Located
@@ -119,7 +119,9 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions,
         matcher = "sequential"  # photos: by count and order (windowshop.photos.pairs)
     if matcher not in ("auto",) + MATCHERS:
         raise UserError(f"unknown matcher {matcher!r}; use {', '.join(MATCHERS)} or auto")
-    single = len({(p.camera_key, p.pixels.shape) for p in photos}) == 1
+    # one camera for the photos of one lens, those held the other way turned to match
+    turned = orient.turned_names(photos)
+    single = len({orient.sfm_key(p, f"{p.name}.jpg" in turned) for p in photos}) == 1
     intrinsics = None
     if options.intrinsics is not None:
         if len({(p.pixels.shape, round(p.scale, 6)) for p in photos}) != 1:
@@ -130,7 +132,8 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions,
     if priors is not None and priors.usable([p.name for p in photos], priors.heading):
         headings = tuple(priors.heading.get(p.name) for p in photos)
     return SfmSettings(matcher=matcher, intrinsics=intrinsics, single_camera=single,
-                       seed=options.seed, verbose=options.verbose, headings=headings)
+                       seed=options.seed, verbose=options.verbose, headings=headings,
+                       turned=turned if single else frozenset())
 
 
 def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
@@ -173,6 +176,8 @@ def _views(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str, np
         image = sfm.reconstruction.find_image_with_name(p.image_name)
         seen = [(labels.get(q.point3D_id, -1), q.xy) for q in image.points2D if q.has_point3D()]
         uv = {k: np.array([xy for label, xy in seen if label == k]).reshape(-1, 2) for k in (0, 1)}
+        if p.image_name in sfm.turned:
+            uv = {k: orient.photo_xy(xy, p.camera.width) for k, xy in uv.items()}
         views.append(segment.View(p.name, pixels[p.image_name], p.camera, uv[1], uv[0]))
     return views
 
@@ -241,7 +246,7 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     plane then bounds nothing). Not `by_points`: the object is where the cameras look, found
     by its masks alone (plane.isolate). UserError when no object stands out, or the photos agree
     on no up when asked for it."""
-    posed = output.posed_photos(sfm.reconstruction)
+    posed = output.posed_photos(sfm.reconstruction, sfm.turned)
     cameras = [p.camera for p in posed]
     ids = np.array(list(sfm.reconstruction.points3D.keys()), dtype=np.int64)
     points = np.array([sfm.reconstruction.points3D[i].xyz for i in ids]).reshape(-1, 3)
@@ -292,14 +297,18 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
                    plane=isolated.plane, raw_masks=raw, up_source=isolated.up_source)
 
 
-def _write(out_dir: Path, image_dir: Path, sfm: SfmResult, found: Located, source: Path,
-           advance) -> Path:
-    """Images, masks, transforms.json, the COLMAP model and the camera picture."""
+def _write(out_dir: Path, image_dir: Path, pixels: dict[str, np.ndarray], sfm: SfmResult,
+           found: Located, source: Path, advance) -> Path:
+    """Images, masks, transforms.json, the COLMAP model and the camera picture; `pixels` by
+    image file name."""
     (out_dir / "images").mkdir(parents=True, exist_ok=True)
     if found.masks:
         (out_dir / "masks").mkdir(exist_ok=True)
     for p in found.photos:
-        shutil.copyfile(image_dir / p.image_name, out_dir / "images" / f"{p.name}.jpg")
+        if p.image_name in sfm.turned:  # the photo as taken, not as structure from motion saw it
+            output.write_image(out_dir, p.name, pixels[p.image_name])
+        else:
+            shutil.copyfile(image_dir / p.image_name, out_dir / "images" / f"{p.name}.jpg")
         if found.masks:
             mask = objectbox.mask_image(found.masks[p.name])
             mask.save(out_dir / "masks" / f"{p.name}.png")
@@ -330,6 +339,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
         "attempts": [vars(a) for a in sfm.attempts], "matcher": sfm.matcher,
+        "turned": sorted(sfm.turned),  # images colmap/ holds turned a quarter (photos.orient)
         "pairs": sfm.pairs, "masks": found.mask_kind,
         "plane": {"found": found.plane is not None, "inlier_share": None if found.plane is None
                   else round(found.plane.inlier_share, 3)},
@@ -387,8 +397,10 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         settings = _settings(inputs, photos, options, priors)
         image_dir = work / "images"
         image_dir.mkdir()
-        for photo in photos:
-            output.write_image(work, photo.name, photo.pixels)
+        for photo in photos:  # as structure from motion sees them (windowshop.photos.orient)
+            turn = f"{photo.name}.jpg" in settings.turned
+            output.write_image(work, photo.name,
+                               orient.for_sfm(photo.pixels) if turn else photo.pixels)
         names = [f"{p.name}.jpg" for p in photos]
         sfm = reconstruct(image_dir, names, work, settings, stages)
         matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
@@ -399,7 +411,8 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
                              shown)
         sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
         with stages.stage("writing the scene", len(found.photos)) as advance:
-            transforms = _write(out_dir, image_dir, sfm, found, source, advance)
+            pixels = {f"{p.name}.jpg": p.pixels for p in photos}
+            transforms = _write(out_dir, image_dir, pixels, sfm, found, source, advance)
         summary = _report(source, inputs, photos, dropped, sfm, found, stages)
         summary["verification"] = _verification(choice, options.force)
         summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,

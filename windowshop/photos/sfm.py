@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from windowshop.photos import fill, pairs
+from windowshop.photos import fill, orient, pairs
 from windowshop.photos.progress import Stages
 
 MIN_KEYPOINTS = 80  # fewer SIFT features than this in a photo: too little texture to place it
@@ -86,7 +86,9 @@ class SfmSettings:
     # frames, by name) or "retrieval"
     matcher: str = "auto"
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (working px)
-    single_camera: bool = True  # all photos share one camera (same size and EXIF camera)
+    single_camera: bool = True  # all photos share one camera (one EXIF camera, one shape as turned)
+    # image names turned a quarter for structure from motion (windowshop.photos.orient)
+    turned: frozenset[str] = frozenset()
     seed: int = 0
     verbose: bool = False
     # the known-turntable prior for a few photos (windowshop.photos.fill): photos left over are
@@ -124,6 +126,7 @@ class SfmResult:
     guessed: list[str] = field(default_factory=list)
     ring_method: dict[str, str] = field(default_factory=dict)  # guessed name -> how
     database: Path | None = None  # the features and verified pairs the model is checked against
+    turned: frozenset[str] = frozenset()  # images turned a quarter (windowshop.photos.orient)
 
 
 def quiet_logging(verbose: bool) -> None:
@@ -347,7 +350,8 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
     filled = fill.Filled()
     if settings.ring and best is not None and len(placed) < len(names) <= WIDE_MAX_PHOTOS:
         start = time.perf_counter()
-        filled = fill.fill(best, best_database, names, settings.seed, settings.ring_guess)
+        filled = fill.fill(best, best_database, names, settings.seed, settings.ring_guess,
+                           settings.turned)
         attempts.append(Attempt("ring", len(placed) + len(filled.measured),
                                 time.perf_counter() - start))
     placed = sorted(placed + filled.measured)
@@ -357,18 +361,22 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                      keypoints=keypoints, attempts=attempts, matcher=matcher,
                      pairs=len(name_pairs), guessed=sorted(filled.paired + filled.guessed),
                      ring_method={n: "paired" for n in filled.paired}
-                     | {n: "guessed" for n in filled.guessed}, database=best_database)
+                     | {n: "guessed" for n in filled.guessed}, database=best_database,
+                     turned=settings.turned)
 
 
-def write_gravity(database: Path, gravity: dict[str, np.ndarray]) -> None:
+def write_gravity(database: Path, gravity: dict[str, np.ndarray],
+                  turned: frozenset[str] = frozenset()) -> None:
     """The phone's gravity of each image (by file name; `gravity` holds its up, camera frame with
     OpenCV axes) as COLMAP pose priors, which the global mapper's rotation averaging can use
-    (COLMAP's prior holds the direction of gravity itself: down)."""
+    (COLMAP's prior holds the direction of gravity itself: down). `turned` images' gravity is
+    turned with them."""
     with pycolmap.Database.open(database) as db:
         for image in db.read_all_images():
             if image.name not in gravity:
                 continue
+            up = np.asarray(gravity[image.name], dtype=np.float64)
+            up = orient.sfm_vector(up) if image.name in turned else up
             sensor = pycolmap.sensor_t(pycolmap.SensorType.CAMERA, image.camera_id)
             db.write_pose_prior(pycolmap.PosePrior(
-                corr_data_id=pycolmap.data_t(sensor, image.image_id),
-                gravity=-np.asarray(gravity[image.name], dtype=np.float64)))
+                corr_data_id=pycolmap.data_t(sensor, image.image_id), gravity=-up))

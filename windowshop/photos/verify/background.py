@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 import pycolmap
 
+from windowshop.photos import orient
 from windowshop.photos.align import rotation_angle
 from windowshop.photos.verify.pairs import ALIKE
 from windowshop.photos.verify.types import Check, Hypothesis
@@ -83,8 +84,9 @@ def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
             for i in (first, second):
                 if i not in keypoints:
                     keypoints[i] = db.read_keypoints(i)[:, :2]
-            behind = (_off_object(keypoints[first][matches[:, 0]], photos[a], found)
-                      & _off_object(keypoints[second][matches[:, 1]], photos[b], found))
+            behind = (_off_object(keypoints[first][matches[:, 0]], photos[a], found, sfm.turned)
+                      & _off_object(keypoints[second][matches[:, 1]], photos[b], found,
+                                    sfm.turned))
             turned = rotation_angle(rotations[b] @ rotations[a].T)
             explained = behind.copy()
             if turned <= NEAR_DEG and not {a, b} & guessed:
@@ -122,11 +124,13 @@ def _explained(first: pycolmap.Image, second: pycolmap.Image, pixels: np.ndarray
     return explained
 
 
-def _off_object(points: np.ndarray, photo, found) -> np.ndarray:
+def _off_object(points: np.ndarray, photo, found, turned: frozenset[str]) -> np.ndarray:
     """(K,) whether each of `points` (K, 2), pixels of the photo as structure from motion read
-    it, lies off the object's outline (its mask cut to the others' hull, at the mask's own size:
-    a photo's own outline can take in the book or table under a close-up's object, whose
-    matches are the background's)."""
+    it (a quarter turned when its image is among `turned`), lies off the object's outline (its
+    mask cut to the others' hull, at the mask's own size: a photo's own outline can take in the
+    book or table under a close-up's object, whose matches are the background's)."""
+    if photo.image_name in turned:
+        points = orient.photo_xy(points, photo.camera.width)
     mask = found.masks[photo.name]
     scale = mask.shape[1] / photo.camera.width
     u = np.clip((points[:, 0] * scale).astype(int), 0, mask.shape[1] - 1)

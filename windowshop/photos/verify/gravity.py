@@ -26,7 +26,8 @@ ADVICE = ("some photos are placed at angles the phone's own sensors deny: the ob
 def check(hypothesis: Hypothesis) -> Check | None:
     if not hypothesis.gravity:
         return None
-    c2ws = {p.image_name: p.camera.c2w for p in posed_photos(hypothesis.sfm.reconstruction)}
+    posed = posed_photos(hypothesis.sfm.reconstruction, hypothesis.sfm.turned)
+    c2ws = {p.image_name: p.camera.c2w for p in posed}
     measured = sensors.world_up(c2ws, hypothesis.gravity)
     if measured is None or len(measured[1]) < 3:
         return None

@@ -7,6 +7,8 @@ no masks to compare) in a module of its own:
     pairs        the model's relative rotations against each strongly matched pair's own (the
                  two-view geometry its matches give): a folded or misplaced photo contradicts
                  the pairs that tie it to its true neighbours (Heinly et al. 2014)
+    alone        a photo that none of its pairs, weak ones too, places where the model does:
+                 left out to be reshot
     silhouettes  each mask against the visual hull the *other* views carve (silhouette
                  coherence, Hernandez et al. 2007): a wrong pose carves the object away
     upright      the support plane's normal against the photos' own up (photos are taken
@@ -28,8 +30,8 @@ no masks to compare) in a module of its own:
 
 from __future__ import annotations
 
-from windowshop.photos.verify import (background, gravity, pairs, scale, silhouettes, support,
-                                      upright, viewpoints)
+from windowshop.photos.verify import (alone, background, gravity, pairs, scale, silhouettes,
+                                      support, upright, viewpoints)
 from windowshop.photos.verify.types import Check, Hypothesis, Verdict
 
 __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
@@ -37,7 +39,7 @@ __all__ = ["Check", "Hypothesis", "Verdict", "verify"]
 
 def verify(hypothesis: Hypothesis) -> Verdict:
     """Every check that applies to `hypothesis`."""
-    checks = (check(hypothesis) for check in (pairs.check, silhouettes.check, upright.check,
-                                               gravity.check, viewpoints.check, scale.check,
-                                               background.check, support.check))
+    checks = (check(hypothesis) for check in (pairs.check, alone.check, silhouettes.check,
+                                               upright.check, gravity.check, viewpoints.check,
+                                               scale.check, background.check, support.check))
     return Verdict([c for c in checks if c is not None])

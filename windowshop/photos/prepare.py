@@ -349,16 +349,16 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     }
 
 
-def _choose(sfm: SfmResult, photos: list[Photo], work: Path, settings: SfmSettings,
+def _choose(sfm: SfmResult, pixels: dict[str, np.ndarray], work: Path, settings: SfmSettings,
             gravity: dict[str, np.ndarray] | None, options: PrepareOptions,
             shown: dict[str, str]) -> hypotheses.Choice:
     """The verified hypothesis of the scene (windowshop.photos.hypotheses), its object found;
-    UserError with what was wrong when none passes, unless `options.force`."""
+    UserError with what was wrong when none passes, unless `options.force`. `pixels` holds the
+    photos by image file name."""
     search = hypotheses.Search(
-        image_dir=work / "images", work=work, names=[f"{p.name}.jpg" for p in photos],
-        pixels={f"{p.name}.jpg": p.pixels for p in photos}, options=options,
+        image_dir=work / "images", work=work, names=list(pixels), pixels=pixels, options=options,
         settings=settings, locate=partial(locate, gravity=gravity),
-        check_placed=lambda result: check_placed(result, len(photos), shown),
+        check_placed=lambda result: check_placed(result, len(pixels), shown),
         deadline=time.perf_counter() + options.verify_seconds, evidence=sfm.database,
         gravity=gravity)
     choice = hypotheses.choose(search, sfm)
@@ -401,17 +401,16 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
             turn = f"{photo.name}.jpg" in settings.turned
             output.write_image(work, photo.name,
                                orient.for_sfm(photo.pixels) if turn else photo.pixels)
-        names = [f"{p.name}.jpg" for p in photos]
-        sfm = reconstruct(image_dir, names, work, settings, stages)
+        pixels = {f"{p.name}.jpg": p.pixels for p in photos}  # by image file name, as taken
+        sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
         matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
         shown = {f"{p.name}.jpg": _shown(p) for p in photos}
         check_placed(sfm, len(photos), shown)
         with stages.stage("finding and checking the object"):
-            choice = _choose(sfm, photos, work, settings, _gravity(priors, photos), options,
+            choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos), options,
                              shown)
         sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
         with stages.stage("writing the scene", len(found.photos)) as advance:
-            pixels = {f"{p.name}.jpg": p.pixels for p in photos}
             transforms = _write(out_dir, image_dir, pixels, sfm, found, source, advance)
         summary = _report(source, inputs, photos, dropped, sfm, found, stages)
         summary["verification"] = _verification(choice, options.force)

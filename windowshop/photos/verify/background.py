@@ -87,13 +87,13 @@ def background_shares(hypothesis: Hypothesis, min_inliers: int = MIN_INLIERS
             behind = (_off_object(keypoints[first][matches[:, 0]], photos[a], found, sfm.turned)
                       & _off_object(keypoints[second][matches[:, 1]], photos[b], found,
                                     sfm.turned))
-            turned = rotation_angle(rotations[b] @ rotations[a].T)
+            degrees = rotation_angle(rotations[b] @ rotations[a].T)
             explained = behind.copy()
-            if turned <= NEAR_DEG and not {a, b} & guessed:
+            if degrees <= NEAR_DEG and not {a, b} & guessed:
                 explained[behind] = _explained(
                     images[a], images[b], keypoints[first][matches[behind, 0]],
                     keypoints[second][matches[behind, 1]])
-            out.append((a, b, len(matches), turned, float(behind.mean()),
+            out.append((a, b, len(matches), degrees, float(behind.mean()),
                         float(explained.mean())))
     return out
 

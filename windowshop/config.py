@@ -236,7 +236,7 @@ class ExportOptions:
     tune: bool = True  # move the surface to match all the photos and their masks (export/tune.py)
     refine: bool = True  # fit the texture to all the photos by least squares (export/refine.py)
     keep_share: float = 0.05  # pieces under this share of the largest piece's area are dropped
-    smooth: int = 1  # Taubin steps after the tune (0: none), so a viewer's light shades evenly
+    smooth: int = 3  # Taubin steps after the tune at most (0: none), till it is no rougher than before
     close_unseen: bool = True  # close the side no photo saw by a hull, in grey (export/unseen.py)
     cut_support: bool = True  # cut a contact shadow's slab, the base flat (export/support.py)
     roughness: float = 1.0  # of the PBR material (never metallic; 1: no highlight over the baked ones)

@@ -30,6 +30,8 @@ def test_photos_colour_the_model_and_masks_carve_it(tmp_path):
     assert with_photos.info["photos"] > 0 and field_only.info["photos"] == 0
     assert "refine" in with_photos.info["seconds"] and "refine" not in baked.info["seconds"]
     assert "carve" in with_photos.info["seconds"]  # the object scene's photos have masks
+    angles = with_photos.info["neighbour_angle"]  # smoothed back after the tune
+    assert angles["delivered"] <= angles["before tune"]
     errors = []
     view = scene.split("train")[1]
     for asset in (with_photos, baked, field_only):

@@ -32,6 +32,23 @@ def test_taubin_smooths_without_shrinking_and_keeps_fixed_vertices():
     assert taubin(mesh, 0) is mesh
 
 
+def test_taubin_stops_at_the_first_step_that_is_enough():
+    mesh = noisy_sphere()
+    target = 0.4 * neighbour_angles(mesh).mean()
+    checked = []
+
+    def enough(smoothed: Mesh) -> bool:
+        checked.append(smoothed)
+        return neighbour_angles(smoothed).mean() <= target
+
+    smoothed = taubin(mesh, 20, enough=enough)
+    steps = len(checked)
+    assert 1 < steps < 20
+    assert neighbour_angles(smoothed).mean() <= target
+    assert neighbour_angles(taubin(mesh, steps - 1)).mean() > target  # one step fewer is not
+    assert np.array_equal(smoothed.vertices, taubin(mesh, steps).vertices)
+
+
 def test_compact_drops_unused_vertices_and_keeps_their_order():
     from windowshop.export.mesh import Mesh, compact
 

@@ -12,7 +12,7 @@
                       -> UVs and the base colour baked from the photos, the field's where no
                          bake photo sees the surface, grey on the side none saw (texture, photos)
                       -> moved again to match all the photos and their masks (tune), then
-                         smoothed (mesh.taubin: the tune roughens it), and held within the
+                         smoothed back to no rougher than before it (mesh.taubin), held within the
                          hull of the faces the photos see (unseen.held_to_covered)
                       -> that texture refined by least squares against all the photos (refine)
                       -> the model frame: +Y up, standing at the origin (frame.model_frame),
@@ -140,7 +140,9 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             angles["before tune"] = mean_angle(mesh)
             mesh = tune_surface(mesh, unwrapped.uv[unwrapped.faces], image, every_photo, cell)
             angles["tuned"] = mean_angle(mesh)
-            mesh = taubin(mesh, options.smooth)
+            # the tune roughens the surface: smooth it back to no rougher than it came
+            mesh = taubin(mesh, options.smooth,
+                          enough=lambda smoothed: mean_angle(smoothed) <= angles["before tune"])
             if cut is not None:
                 mesh = Mesh(flatten_base(mesh.vertices, *cut, cell), mesh.faces)
             unwrapped = tex.moved(unwrapped, mesh)

@@ -8,6 +8,7 @@ with empty space, so every piece is closed (watertight) even where the object me
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -200,10 +201,10 @@ def neighbour_angles(mesh: Mesh, pairs: np.ndarray | None = None) -> np.ndarray:
 
 
 def taubin(mesh: Mesh, steps: int, shrink: float = 0.5, inflate: float = -0.53,
-           fixed: np.ndarray | None = None) -> Mesh:
+           fixed: np.ndarray | None = None, enough: Callable[[Mesh], bool] | None = None) -> Mesh:
     """`mesh` smoothed by Taubin's lambda|mu filter (`steps` pairs of a step towards the
-    neighbours' mean and one back out, so the surface smooths without shrinking); `fixed` (V,)
-    bool vertices stay."""
+    neighbours' mean and one back out, so the surface smooths without shrinking; fewer once
+    `enough(smoothed)` holds after a pair); `fixed` (V,) bool vertices stay."""
     from windowshop.export.settle import neighbour_mean
 
     if steps <= 0:
@@ -216,4 +217,6 @@ def taubin(mesh: Mesh, steps: int, shrink: float = 0.5, inflate: float = -0.53,
             if fixed is not None:
                 step[fixed] = 0.0
             x = x + step
+        if enough is not None and enough(Mesh(x, mesh.faces)):
+            break
     return Mesh(x, mesh.faces)

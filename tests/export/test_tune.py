@@ -102,9 +102,11 @@ def tuned(mesh: Mesh, photos: Photos) -> Mesh:
 @pytest.mark.parametrize("drawn", [0.85, 1.15])
 def test_a_sphere_drawn_off_the_photographed_one_moves_onto_it(zbuffer, drawn):
     photos = ring_photos(trimesh.creation.icosphere(subdivisions=3, radius=1.0))
+    threads = torch.get_num_threads()
     # the surface starts about 2 cells off the photographed one
     radius = np.linalg.norm(tuned(grey_sphere(drawn), photos).vertices, axis=1)
     assert abs(np.median(radius) - 1.0) < 0.4 * abs(drawn - 1.0)
+    assert torch.get_num_threads() == threads  # its thread trials (device.ThreadTuner) undone
 
 
 def test_without_masks_flat_colour_gives_no_reason_to_move(zbuffer):

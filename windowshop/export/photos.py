@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -94,9 +95,12 @@ def splat_depth(xy: torch.Tensor, z: torch.Tensor, camera: Camera) -> torch.Tens
     h, w = camera.height, camera.width
     px = torch.floor(xy).long()
     ok = (z > 0) & (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] < w) & (px[:, 1] < h)
-    depth = torch.full((h * w,), float("inf"), dtype=z.dtype, device=z.device)
-    depth.scatter_reduce_(0, px[ok, 1] * w + px[ok, 0], z[ok], "amin")
-    return -F.max_pool2d(-depth.view(1, 1, h, w), 3, stride=1, padding=1)[0, 0]
+    # the points off the image go to a spare last pixel: selecting the others first took three
+    # quarters of the time (700k points a photo on dtu_skull's bake)
+    pixel = torch.where(ok, px[:, 1] * w + px[:, 0], h * w)
+    depth = torch.full((h * w + 1,), float("inf"), dtype=z.dtype, device=z.device)
+    depth.scatter_reduce_(0, pixel, z, "amin")
+    return -F.max_pool2d(-depth[:-1].view(1, 1, h, w), 3, stride=1, padding=1)[0, 0]
 
 
 def edge_ramp(depth: np.ndarray, jump: float, focal: float) -> np.ndarray:
@@ -111,7 +115,9 @@ def edge_ramp(depth: np.ndarray, jump: float, focal: float) -> np.ndarray:
     low = ndimage.minimum_filter(np.where(finite, depth, np.inf), 3)
     clean = finite & (top - low <= jump + 2 * SLOPE * low / focal)
     # the 3x3 nearest depth widened the silhouette by one pixel: the ramp starts one further in
-    inside = ndimage.distance_transform_edt(clean)
+    # OpenCV's exact Euclidean distance (as scipy's distance_transform_edt, to float32), 3-4x
+    # faster: one call per photo in the settle, the bake and the vertex colours
+    inside = cv2.distanceTransform(clean.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return np.clip((inside - 1.5) / EDGE_PIXELS, 0.0, 1.0).astype(np.float32)
 
 

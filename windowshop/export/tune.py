@@ -28,13 +28,16 @@ the outline only 24.30.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import time
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from scipy import sparse
 
+from windowshop.device import ThreadTuner
 from windowshop.export.mesh import Mesh, vertex_normals
 from windowshop.export.photos import Photos
 from windowshop.export.raster import barycentrics, screen, visible_faces
@@ -250,16 +253,23 @@ def tune_surface(mesh: Mesh, corner_uv: np.ndarray, texture: np.ndarray, photos:
     offset = torch.zeros(len(base), requires_grad=True)
     optimiser = Adam(offset, LEARNING_RATE)
     order = np.random.default_rng(0).permutation(len(photos.cameras))
-    for step in range(STEPS):
-        i = int(order[step % len(order)])
-        photo = torch.as_tensor(photos.images[i], dtype=torch.float32).reshape(-1, 3)
-        alpha = photos.alphas[i]
-        alpha = None if alpha is None else torch.as_tensor(alpha, dtype=torch.float32).reshape(-1)
-        loss = photo_loss(base + offset[:, None] * normals, faces, uv, image, edges, sides,
-                          photos.cameras[i], photo, alpha)
-        offset.grad = None
-        loss.backward()
-        offset.grad += torch.from_numpy(smoothing @ offset.detach().numpy())
-        optimiser.step(offset.grad)
+    # the thread count that steps fastest, as the fit's: beside another job, torch's threads
+    # spin while one of them waits for a core (bench/RESULTS.md, stop 55)
+    tuner = ThreadTuner(base.device)
+    with contextlib.closing(tuner):
+        for step in range(STEPS):
+            tuner.before_step()
+            began = time.perf_counter()
+            i = int(order[step % len(order)])
+            photo = torch.as_tensor(photos.images[i], dtype=torch.float32).reshape(-1, 3)
+            alpha = None if photos.alphas[i] is None else torch.as_tensor(
+                photos.alphas[i], dtype=torch.float32).reshape(-1)
+            loss = photo_loss(base + offset[:, None] * normals, faces, uv, image, edges, sides,
+                              photos.cameras[i], photo, alpha)
+            offset.grad = None
+            loss.backward()
+            offset.grad += torch.from_numpy(smoothing @ offset.detach().numpy())
+            optimiser.step(offset.grad)
+            tuner.after_step(time.perf_counter() - began)
     moved = base + offset.detach()[:, None] * normals
     return Mesh(moved.numpy().astype(np.float64), mesh.faces)

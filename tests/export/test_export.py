@@ -126,6 +126,14 @@ def test_size_cm_scales_to_the_real_height(object_run, tmp_path):
     loaded = trimesh.load(out, force="mesh")
     assert loaded.extents[1] == pytest.approx(0.25, rel=1e-4)
     assert json.loads(side_file(out).read_text())["units"] == "metres"
+    # vertex colours under a metal-free material: without one, glTF's default is a metal
+    from pygltflib import GLTF2
+
+    gltf = GLTF2().load(str(out))
+    (primitive,) = gltf.meshes[0].primitives
+    colour = gltf.accessors[primitive.attributes.COLOR_0]
+    assert colour.normalized and colour.count == gltf.accessors[primitive.attributes.POSITION].count
+    assert gltf.materials[primitive.material].pbrMetallicRoughness.metallicFactor == 0.0
 
 
 def test_a_path_that_is_not_a_run_fails_clearly(tmp_path, capsys):

@@ -203,8 +203,10 @@ def neighbour_angles(mesh: Mesh, pairs: np.ndarray | None = None) -> np.ndarray:
 def taubin(mesh: Mesh, steps: int, shrink: float = 0.5, inflate: float = -0.53,
            fixed: np.ndarray | None = None, enough: Callable[[Mesh], bool] | None = None) -> Mesh:
     """`mesh` smoothed by Taubin's lambda|mu filter (`steps` pairs of a step towards the
-    neighbours' mean and one back out, so the surface smooths without shrinking; fewer once
-    `enough(smoothed)` holds after a pair); `fixed` (V,) bool vertices stay."""
+    neighbours' mean and one back out, so the surface smooths without shrinking); with
+    `enough`, it stops in the first pair after which `enough(smoothed)` holds, as early along
+    it as it holds (smoothing costs the photos' detail: take no more than needed); `fixed` (V,)
+    bool vertices stay."""
     from windowshop.export.settle import neighbour_mean
 
     if steps <= 0:
@@ -212,11 +214,26 @@ def taubin(mesh: Mesh, steps: int, shrink: float = 0.5, inflate: float = -0.53,
     mean = neighbour_mean(mesh)
     x = mesh.vertices.copy()
     for _ in range(steps):
+        previous = x
         for factor in (shrink, inflate):
             step = factor * (mean @ x - x)
             if fixed is not None:
                 step[fixed] = 0.0
             x = x + step
         if enough is not None and enough(Mesh(x, mesh.faces)):
-            break
+            return Mesh(_least_enough(previous, x, mesh.faces, enough), mesh.faces)
     return Mesh(x, mesh.faces)
+
+
+def _least_enough(before: np.ndarray, after: np.ndarray, faces: np.ndarray,
+                  enough: Callable[[Mesh], bool], halvings: int = 4) -> np.ndarray:
+    """The vertices the shortest way from `before` to `after` (to 1/2^`halvings` of it) at
+    which `enough` holds; it holds at `after`."""
+    low, high = 0.0, 1.0
+    for _ in range(halvings):
+        middle = (low + high) / 2
+        if enough(Mesh(before + middle * (after - before), faces)):
+            high = middle
+        else:
+            low = middle
+    return before + high * (after - before)

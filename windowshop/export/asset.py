@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import functools
+import io
 from dataclasses import dataclass, field
 
 import numpy as np
+from PIL import Image
 
 from windowshop.export.frame import ModelFrame
 
@@ -22,3 +25,11 @@ class Asset:
     roughness: float  # of the PBR material (never metallic)
     frame: ModelFrame
     info: dict = field(default_factory=dict)  # level, IoU, timings: what the side file records
+
+    @functools.cached_property
+    def texture_png(self) -> bytes:
+        """The texture as PNG, encoded once for every format written (GLB and USDZ embed it), at
+        zlib's fastest level: 0.15 s against the default's 0.38 s for 1024 x 1024, 3% larger."""
+        png = io.BytesIO()
+        Image.fromarray(self.texture).save(png, format="PNG", compress_level=1)
+        return png.getvalue()

@@ -6,16 +6,14 @@ open on and, for a capture that did not go all round, the arc a viewer may turn 
 
 pygltflib writes the file as the asset holds it, and imports in 0.1 s: trimesh, which wrote it
 before, took 0.7-1.1 s to import (networkx, scipy.spatial) and PNG-encoded the texture at zlib's
-default level (0.38 s for 1024 x 1024 against 0.15 s at level 1, 3% larger), a tenth of the
-export of a 20-photo capture (bench/RESULTS.md, stop 55)."""
+default level (Asset.texture_png: once for both formats, at level 1), a tenth of the export of
+a 20-photo capture (bench/RESULTS.md, stop 55)."""
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 from windowshop.export.asset import Asset
 
@@ -41,13 +39,12 @@ def write_glb(asset: Asset, path: Path) -> None:
 
     def accessor(values: np.ndarray, component: int, bounds: bool = False,
                  normalized: bool = False) -> int:
-        values = np.ascontiguousarray(values)
-        columns = 1 if values.ndim == 1 else values.shape[1]
+        rows = np.ascontiguousarray(values).reshape(len(values), -1)
         gltf.accessors.append(Accessor(
-            bufferView=view(values.tobytes()), componentType=component, count=len(values),
-            type=TYPES[columns], normalized=normalized or None,
-            min=values.reshape(len(values), -1).min(0).tolist() if bounds else None,
-            max=values.reshape(len(values), -1).max(0).tolist() if bounds else None))
+            bufferView=view(rows.tobytes()), componentType=component, count=len(rows),
+            type=TYPES[values.shape[1] if values.ndim > 1 else 1], normalized=normalized or None,
+            min=rows.min(0).tolist() if bounds else None,
+            max=rows.max(0).tolist() if bounds else None))
         return len(gltf.accessors) - 1
 
     attributes = Attributes(POSITION=accessor(asset.vertices.astype(np.float32), FLOAT, bounds=True),
@@ -55,9 +52,7 @@ def write_glb(asset: Asset, path: Path) -> None:
     colour = PbrMetallicRoughness(metallicFactor=0.0, roughnessFactor=asset.roughness)
     if asset.texture is not None:
         attributes.TEXCOORD_0 = accessor(asset.uv.astype(np.float32), FLOAT)  # glTF's v, as asset
-        png = io.BytesIO()
-        Image.fromarray(asset.texture).save(png, format="PNG", compress_level=1)
-        gltf.images.append(Picture(bufferView=view(png.getvalue()), mimeType="image/png"))
+        gltf.images.append(Picture(bufferView=view(asset.texture_png), mimeType="image/png"))
         gltf.textures.append(Texture(source=0))
         colour.baseColorTexture = TextureInfo(index=0)
     else:

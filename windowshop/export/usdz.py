@@ -9,7 +9,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 from windowshop.export.asset import Asset
 
@@ -67,8 +66,7 @@ def write_stage(asset: Asset, usdc: Path) -> None:
         # USD's t = 0 at the texture's bottom row, glTF's v = 0 at its top
         st.Set(Vt.Vec2fArray.FromNumpy(np.stack([asset.uv[:, 0], 1.0 - asset.uv[:, 1]], -1)
                                        .astype(np.float32)))
-        # zlib's fastest level: 0.15 s against 0.38 s for a 1024 texture, 3% larger
-        Image.fromarray(asset.texture).save(usdc.parent / TEXTURE, compress_level=1)
+        (usdc.parent / TEXTURE).write_bytes(asset.texture_png)
     else:
         colours = primvars.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                          UsdGeom.Tokens.vertex)

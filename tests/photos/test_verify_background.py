@@ -37,6 +37,30 @@ def test_a_fold_whose_matches_all_lie_on_the_object_is_refused(tmp_path, intrins
     assert not (tmp_path / "scene" / "transforms.json").exists()  # nothing a later run could take
 
 
+def test_a_few_photos_folded_once_are_refused(tmp_path):
+    """Six frames over 155 degrees of the walk, every fifth: the wide retry places them all, 0025
+    (at 32 degrees round the can) beside 0000 (at 237) by the logo they both show, and 0020 off
+    the circle. Only 3 pairs stand side by side, too few for MIN_CONFLICTS; the one that matches
+    only on the can is a third of them (SMALL_SHARE), and no other hypothesis passes."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in ("0000", "0005", "0010", "0015", "0020", "0025"):
+        (photos / f"{name}.jpg").symlink_to(DATA / "beer_can" / "images" / f"{name}.jpg")
+    with pytest.raises(UserError) as refused:
+        prepare(photos, tmp_path / "scene", PrepareOptions(), show=False)
+    message = str(refused.value)
+    assert "0000.jpg-0025.jpg" in message, message
+    assert "look alike" in message
+    assert not (tmp_path / "scene" / "transforms.json").exists()
+
+
+@pytest.mark.parametrize("conflicts, near, folded", [
+    (1, 3, True), (2, 5, True), (1, 5, False), (3, 19, False),  # a few photos
+    (4, 18, True), (19, 181, False), (0, 2, False)])  # many
+def test_a_share_of_the_side_by_side_pairs_folds_however_few(conflicts, near, folded):
+    assert background.folded(conflicts, near) is folded
+
+
 def test_the_check_does_not_apply_without_outlines():
     from windowshop.photos.verify.types import Hypothesis
 

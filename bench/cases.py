@@ -23,10 +23,10 @@ each as a folder with images/ and a ground-truth transforms.json (one JSON line 
                 this repository's own model of all its frames (prepare at the defaults; the
                 published poses hold only for 0000-0013, with which it agrees): one-sided arcs
                 of a can printed alike on two sides, over a tiled floor (`--arcs 6:150 8:200`).
-The same on every run (beer_loop whatever the seed); `--seed K` (K > 0) gives other captures of the same kind, to check that
-an outcome is not one seed's: the rendered cases' cameras, jitter and prints drawn from K,
-skull_up every third photo from photo K mod 3, fruit_rolled each photo's quarter drawn at random,
-fruit_mixed each photo's shape.
+The same on every run; `--seed K` (K > 0) gives other captures of the same kind (beer_loop
+alike whatever K), to check that an outcome is not one seed's: the rendered cases' cameras,
+jitter and prints drawn from K, skull_up every third photo from photo K mod 3, fruit_rolled
+each photo's quarter drawn at random, fruit_mixed each photo's shape.
 The turned cases read ../shared/data in place.
 """
 

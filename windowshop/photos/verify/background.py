@@ -60,8 +60,9 @@ MAX_SHARE = 0.2
 # (0000-0025, every 5th) placed 0025 (32 deg) beside 0000 (237 deg): 1 of 3; one-sided arcs of
 # its walk (bench_verify against this repository's model of all 70 frames) folded at 1 of 3,
 # 2 of 5 and 2 of 4. No right model of bench_verify's runs kept from stops 51 and 53 (seeds 0
-# and 1: 112 models this check applies to) and stop 56 (seed 0) went over 0.20 (fruit_rolled seed 1's arc100x8@240,
-# 1 of 5; dtu_skull's arc60x6@240, 1 of 10), nor bench_real's dtu_skull 20 (3 of 19)
+# and 1: 112 models this check applies to) and stop 56 (seed 0) went over 0.20 (fruit_rolled
+# seed 1's arc100x8@240, 1 of 5; dtu_skull's arc60x6@240, 1 of 10), nor bench_real's
+# dtu_skull 20 (3 of 19)
 SMALL_SHARE = 0.3
 
 
@@ -182,8 +183,7 @@ def folded(conflicts: int, near: int) -> bool:
     """Whether `conflicts` of the `near` pairs placed side by side (side_by_side) say the model
     folds (the module constants)."""
     share = conflicts / max(near, 1)
-    return (conflicts >= MIN_CONFLICTS and share > MAX_SHARE) or (conflicts > 0
-                                                                    and share > SMALL_SHARE)
+    return share > SMALL_SHARE or (conflicts >= MIN_CONFLICTS and share > MAX_SHARE)
 
 
 def _applies(hypothesis: Hypothesis) -> bool:

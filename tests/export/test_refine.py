@@ -106,3 +106,48 @@ def test_an_estimated_mask_that_misses_the_object_does_not_bleach_it():
     right = (slice(6, SIZE - 6), slice(SIZE // 2 + 3, SIZE - 6))  # texels under the missed half
     assert given[right].mean() > 0.4
     assert abs(estimated[right].mean() - 0.3) < 0.02
+
+
+def test_the_photos_noise_is_not_refined_into_the_texture(monkeypatch):
+    """The four photos with noise of their own (sigma 0.1 a pixel, as a dim phone photo has): a
+    correction free texel by texel fits it as grain, the smooth one (refine.SMOOTH) recovers the
+    pattern from a flat start at half the error."""
+    from windowshop.export import refine
+
+    truth = true_texture()
+    shots = photos(truth)
+    rng = np.random.default_rng(0)
+    noisy = Photos(shots.cameras, [np.clip(image + rng.normal(0.0, 0.1, image.shape), 0, 1)
+                                   .astype(np.float32) for image in shots.images], shots.alphas)
+    vertices, faces = square(0.0, 0.5)
+    start = np.full_like(truth, 0.5, dtype=np.float32)
+    inner = (slice(4, SIZE - 4), slice(4, SIZE - 4))
+    smooth = np.abs(refine_texture(vertices, faces, UV, start, noisy) - truth)[inner].mean()
+    monkeypatch.setattr(refine, "SMOOTH", 0.0)
+    grainy = np.abs(refine_texture(vertices, faces, UV, start, noisy) - truth)[inner].mean()
+    assert smooth < 0.03  # the 8-texel pattern is still there (0.19 from the flat start)
+    assert smooth < 0.7 * grainy
+
+
+def test_texels_side_by_side_in_two_charts_are_not_smoothed_together():
+    """Two triangles, each its own chart, whose texels touch in the texture across x = 0.5: the
+    differences link texels within a triangle, never one of each."""
+    from windowshop.export.refine import chart_differences
+    from windowshop.export.texture import rasterise
+
+    uv = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 1.0], [0.5, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    faces = np.array([[0, 1, 2], [3, 4, 5]])
+    size = 16
+    ids = rasterise(uv, faces, size).reshape(-1)
+    used = np.flatnonzero(ids >= 0)
+    differences = chart_differences(uv, faces, size, used).tocoo()
+    assert np.allclose(np.asarray(differences.sum(1)), 0.0)  # each row: +1 and -1
+    first = used[differences.col[differences.data > 0]]
+    second = used[differences.col[differences.data < 0]]
+    rows = differences.row[differences.data > 0], differences.row[differences.data < 0]
+    first, second = first[np.argsort(rows[0])], second[np.argsort(rows[1])]
+    assert len(first) > 50
+    assert (ids[first] == ids[second]).all()
+    # the two triangles do touch: side by side across their border, in the texture
+    grid = ids.reshape(size, size)
+    assert ((grid[:, :-1] == 0) & (grid[:, 1:] == 1)).any()

@@ -9,12 +9,18 @@ bilinearly (SUPERSAMPLE^2 samples a pixel averaged, when more than one), and fin
 whose drawing matches the photos best:
 
     min_t  sum over pixels ||A t - photo||^2  +  WEIGHT * ||t - t_baked||^2
+                                              +  SMOOTH * ||D (t - t_baked)||^2
 
-(A: each pixel's texel weights), over every pixel the mesh covers (all its samples) in all the
-training photos, not only the bake's few: the mesh is not quite where the photographed surface
-is, and the more views the texture must agree with, the better it holds at views between them.
-The prior keeps texels few pixels pin down near their baked colours. Conjugate gradients on the
-normal equations, ITERATIONS steps, all three channels at once.
+(A: each pixel's texel weights; D: the differences between side-by-side texels of one chart),
+over every pixel the mesh covers (all its samples) in all the training photos, not only the
+bake's few: the mesh is not quite where the photographed surface is, and the more views the
+texture must agree with, the better it holds at views between them. The prior keeps texels few
+pixels pin down near their baked colours. A texel is about a photo's pixel (texture.bake_size),
+so a correction free texel by texel also fits each photo's noise and the mesh's small
+misplacement, as a grain over the surface (dtu_skull's cranium was speckled where its photos are
+smooth); the third term asks the correction to be smooth within a chart, and leaves the baked
+detail as it was. Conjugate gradients on the normal equations, ITERATIONS steps, all three
+channels at once.
 Lego 400x400, 950 steps, 8 held-out views, PSNR anti-aliased: baked 24.81 dB; refined on the 24
 bake photos 25.12, on 48 25.51, on all 100 25.71. Also tried: only pixels inside the photo's
 alpha (>= 0.5) count, 0.1 dB worse (a mesh edge drawn over the background is best pale);
@@ -28,6 +34,11 @@ estimated from the photos (a prepared capture's) are not trusted that far: where
 background the pixel does not count at all, since it is as often the object the mask missed,
 whose texels white would bleach for every other view (bench_models at 320da43, the GLB at one
 sample a pixel: beer_can +0.35, fruit +0.37, kermit +0.30, dtu_skull +0.06 dB).
+The smooth correction (SMOOTH 0 -> 1), GLB PSNR at the held-out photos at one sample a pixel
+(bench/RESULTS.md, stop 57): dtu_skull in the mask 18.74 -> 19.05, kermit 19.68 -> 19.89, fruit
+16.51 -> 16.61, beer_can 17.54 -> 17.58; lego 400x400 26.53 -> 26.75. SMOOTH 0.25 / 4 / 16 gave
+dtu_skull 18.99 / 19.05 / 19.02; smoothing the whole texture instead of the correction, +0.03 at
+most (and it would blur a print's detail that the bake got right).
 """
 
 from __future__ import annotations
@@ -35,6 +46,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 from scipy import sparse
+from scipy.sparse import csgraph
 
 from windowshop.export.carve import MASK_LEVEL
 from windowshop.export.photos import Photos
@@ -44,6 +56,7 @@ from windowshop.scene.types import Camera
 SUPERSAMPLE = 1  # samples a pixel side
 WEIGHT = 0.2  # of the prior towards the baked colours, per texel (a pixel's weights sum to 1)
 ITERATIONS = 15  # conjugate-gradient steps (15 and 60 score the same on lego)
+SMOOTH = 1.0  # of the correction's squared differences between side-by-side texels of one chart
 
 
 def texel_weights(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -143,7 +156,40 @@ def refine_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, imag
     # A^T A once (lego 400: 1 s, 4.5M entries against A's 19M): each step is then one product
     # with it (9 ms) instead of one with A and one with A^T (350 ms)
     normal = (at @ a).tocsr()
+    if SMOOTH > 0:
+        differences = chart_differences(uv, faces, size, used)
+        normal = (normal + SMOOTH * (differences.T @ differences)).tocsr()
     delta = conjugate_gradients(lambda x: normal @ x + WEIGHT * x, at @ residual, ITERATIONS)
     out = start.copy()
     out[used] += delta
     return np.clip(out, 0.0, 1.0).reshape(image.shape).astype(np.float32)
+
+
+def chart_differences(uv: np.ndarray, faces: np.ndarray, size: int, used: np.ndarray
+                      ) -> sparse.csr_matrix:
+    """D (pairs, len(used)), +1 and -1 a row: the differences between side-by-side `used` texels
+    (flat indices into the `size` x `size` texture) whose centres lie on one chart, the faces
+    (F, 3) an unwrapped mesh joins through shared vertices (texture.unwrap splits them where
+    charts meet, so texels side by side in two charts lie apart on the surface)."""
+    from windowshop.export.texture import rasterise
+
+    corners = len(uv)
+    links = sparse.coo_matrix((np.ones(2 * len(faces)),
+                               (np.repeat(faces[:, 0], 2), faces[:, 1:].reshape(-1))),
+                              shape=(corners, corners))
+    vertex_chart = csgraph.connected_components(links, directed=False)[1]
+    ids = rasterise(uv, faces, size)
+    chart = np.where(ids >= 0, vertex_chart[faces[np.maximum(ids, 0), 0]], -1)
+    column = np.full(size * size, -1)
+    column[used] = np.arange(len(used))
+    column = column.reshape(size, size)
+    pairs = []
+    for a, b, chart_a, chart_b in ((column[:, :-1], column[:, 1:], chart[:, :-1], chart[:, 1:]),
+                                   (column[:-1], column[1:], chart[:-1], chart[1:])):
+        keep = (a >= 0) & (b >= 0) & (chart_a >= 0) & (chart_a == chart_b)
+        pairs.append(np.stack([a[keep], b[keep]]))
+    first, second = np.concatenate(pairs, 1)
+    rows = np.arange(len(first))
+    return sparse.csr_matrix((np.repeat([1.0, -1.0], len(first)),
+                              (np.tile(rows, 2), np.concatenate([first, second]))),
+                             shape=(len(first), len(used)))

@@ -78,6 +78,24 @@ def test_trust_names_the_arc_and_heights_the_photos_cover_without_the_doubted_on
     assert not given["checked"] and given["summary"].startswith("not checked")
 
 
+def test_a_photo_alone_across_an_empty_arc_is_left_out_of_the_trusted_arc():
+    from windowshop.quality import advice, empty_arcs, trust
+
+    # a user's ten photos of fruit, seven placed: a run from 325 deg round to 150 deg, and one
+    # photo at 253 deg, 103 and 72 deg from its neighbours
+    names = [f"p{i}.jpg" for i in range(7)]
+    azimuths = np.array([0.0, 26.4, 54.1, 105.1, 149.8, 252.6, 325.0])
+    elevations = np.array([20, 22, 24, 26, 28, 70, 30.0])
+    part = trust(names, azimuths, elevations, {}, True)
+    assert part["arc"] == [325.0, 149.8] and part["arc_degrees"] == 184.8
+    assert part["elevations"] == [20.0, 30.0]  # p5, alone and high up, does not widen them
+    # the advice asks to walk both empty arcs; neither lies inside the arc the report trusts
+    tips = advice({"empty_arcs": empty_arcs(azimuths), "placed": 7})
+    assert any("150° and 253°" in t for t in tips) and any("253° and 325°" in t for t in tips)
+    inside = (np.array([150.0, 253.0, 300.0]) - 325.0) % 360.0 < part["arc_degrees"]
+    assert not inside.any()
+
+
 def test_report_doubts_the_photos_the_chosen_hypothesis_and_the_held_out_check_blamed(tmp_path):
     from windowshop.photos.verify.heldout import MIN_PSNR
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from windowshop.scene.types import Camera, Scene
-from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, covered_arc, gaps_between
+from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, gaps_between, unbroken_arc
 
 GAP_DEGREES = 60.0  # an empty arc of azimuth at least this wide is worth walking again
 FEW_PHOTOS = 12  # placed photos under this: advise more
@@ -119,12 +119,14 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
 
 def trust(names: list[str], azimuths: np.ndarray, elevations: np.ndarray, doubtful: dict[str, str],
           verified: bool | None) -> dict:
-    """Which part of the result to trust: the arc of azimuth and the band of elevation its
-    photos cover, the photos a check doubted (name -> check) left out of both. "level" is
+    """Which part of the result to trust: the widest arc of azimuth its photos cover without an
+    empty arc (GAP_DEGREES, which the advice asks to walk again) and the band of elevation the
+    photos on it cover, the photos a check doubted (name -> check) left out of both. "level" is
     "none" when a check failed and it was delivered by --force, "part" when the trusted photos
     cover under FULL_TURN_SPAN degrees or some were doubted, else "whole"."""
     kept = [i for i, name in enumerate(names) if name not in doubtful] or list(range(len(names)))
-    start, span = covered_arc(azimuths[kept])
+    start, span = unbroken_arc(azimuths[kept], GAP_DEGREES)
+    kept = [i for i in kept if (azimuths[i] - start) % 360.0 <= span + 1e-6]
     level = "none" if verified is False else (
         "part" if span < FULL_TURN_SPAN or doubtful else "whole")
     found = {"level": level, "checked": verified is not None,

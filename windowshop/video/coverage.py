@@ -46,6 +46,20 @@ def covered_arc(azimuths: np.ndarray) -> tuple[float, float]:
     return float(start), float(360.0 - gaps[widest])
 
 
+def unbroken_arc(azimuths: np.ndarray, min_gap: float) -> tuple[float, float]:
+    """(start, span) in degrees of the widest arc over which neighbouring azimuths (N,) stand
+    less than `min_gap` apart: `covered_arc` less what lies beyond its other empty gaps (a photo
+    alone across an empty arc widens the arc the cameras span, but shows only its own side)."""
+    a, gaps = gaps_between(azimuths)
+    empty = np.flatnonzero(gaps >= min_gap)
+    if empty.size <= 1:
+        return covered_arc(azimuths)
+    starts = a[(empty + 1) % a.size]  # each run of photos begins after an empty gap
+    spans = (a[np.roll(empty, -1)] - starts) % 360.0  # and ends where the next one begins
+    widest = int(np.argmax(spans))
+    return float(starts[widest]), float(spans[widest])
+
+
 def swing_azimuths(start: float, span: float, frames: int) -> np.ndarray:
     """(frames,) azimuths going from `start` across `span` degrees and back with a cosine ease.
 

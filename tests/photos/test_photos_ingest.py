@@ -86,6 +86,27 @@ def test_duplicates_and_blurred_are_dropped_with_names(tmp_path):
     assert dropped.reasons["shaky.jpg"].startswith("too blurred")
 
 
+def test_a_sharp_photo_of_plainer_things_is_not_called_blurred(tmp_path, monkeypatch):
+    """A sharp photo of fruit on a table among kermit's cluttered desk: its Laplacian's variance
+    is under BLUR_RATIO of theirs (what it shows, not how sharp it is), and it is kept; the
+    same photo blurred is dropped."""
+    files = sorted(KERMIT.glob("*.jpg"))[:6]
+    fruit = DATA / "fruit" / "newfruit_small" / "IMG_3650.jpg"
+    shaky = tmp_path / "shaky.jpg"
+    Image.open(fruit).filter(ImageFilter.GaussianBlur(1.5)).save(shaky, quality=95)
+    photos = [ingest.read_photo(path, 640) for path in [*files, fruit, shaky]]
+    median = np.median([p.sharpness for p in photos])
+    assert photos[-2].sharpness < ingest.BLUR_RATIO * median  # the variance alone would drop it
+    dropped = ingest.Dropped()
+    kept = ingest.drop_blurred(photos, dropped)
+    assert [p.name for p in kept] == [f.stem for f in files] + ["IMG_3650"]
+    assert list(dropped.reasons) == ["shaky.jpg"] and "blur 0." in dropped.reasons["shaky.jpg"]
+    monkeypatch.setattr(ingest, "BLUR_EXCESS", -1.0)  # the variance alone dropped it
+    alone = ingest.Dropped()
+    ingest.drop_blurred(photos, alone)
+    assert "IMG_3650.jpg" in alone.reasons
+
+
 def test_fewer_than_five_usable_photos(tmp_path):
     files = sorted(KERMIT.glob("*.jpg"))[:4]
     copy = tmp_path / "copy.jpg"

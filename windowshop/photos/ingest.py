@@ -21,6 +21,13 @@ from windowshop.photos.sensors import CAPTURE_FILE, find_capture
 
 MIN_PHOTOS = 5  # below this the verifier's checks cannot tell a right model from a wrong one
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
+# ... when its blur (blur_of) also lies this much over the set's: the Laplacian's variance
+# follows what a photo shows as much as how sharp it is (a plain apple scores 0.28 of a cluttered
+# desk's median, sharp), Crete's measure much less (bench/RESULTS.md, stop 57: every photo of the
+# shared sets the variance drops lies 0.05-0.11 over its set's median; a sharp photo of another
+# object among kermit's, 0.03 under it)
+BLUR_EXCESS = 0.03
+BLUR_SAMPLE = 9  # photos whose blur gives the set's median (evenly spaced), besides the suspects
 
 @dataclass
 class Photo:
@@ -165,19 +172,35 @@ def drop_duplicates(photos: list[Photo], dropped: Dropped) -> list[Photo]:
     return kept
 
 
+def blur_of(pixels: np.ndarray) -> float:
+    """How blurred the image (H, W, 3) uint8 is, 0 (sharp) to 1: Crete et al. 2007's no-reference
+    measure (skimage.measure.blur_effect), how little the neighbours' differences fall when the
+    photo is blurred again; sharp photos of any content score about 0.3-0.45."""
+    from skimage.measure import blur_effect
+
+    return float(blur_effect(pixels.astype(np.float32).mean(-1)))
+
+
 def drop_blurred(photos: list[Photo], dropped: Dropped, ratio: float = BLUR_RATIO) -> list[Photo]:
-    """Photos at least `ratio` times as sharp as the set's median; the others are dropped, named."""
+    """The photos less `ratio` times as sharp as the set's median whose blur (blur_of) lies
+    BLUR_EXCESS over the set's are dropped, named; the rest are kept."""
     if len(photos) <= MIN_PHOTOS:
         return photos
     median = float(np.median([p.sharpness for p in photos]))
-    kept = []
+    suspects = [p for p in photos if p.sharpness < ratio * median]
+    if not suspects:
+        return photos
+    sample = [photos[i] for i in np.unique(np.linspace(0, len(photos) - 1, BLUR_SAMPLE).round()
+                                           .astype(int))]
+    blur = {id(p): blur_of(p.pixels) for p in [*sample, *suspects]}
+    usual = float(np.median([blur[id(p)] for p in sample]))
+    blurred = {id(p) for p in suspects if blur[id(p)] > usual + BLUR_EXCESS}
     for photo in photos:
-        if photo.sharpness < ratio * median:
+        if id(photo) in blurred:
             dropped.reasons[photo.source.name] = (
-                f"too blurred (sharpness {photo.sharpness / median:.2f} of the median)")
-        else:
-            kept.append(photo)
-    return kept
+                f"too blurred (sharpness {photo.sharpness / median:.2f} of the median, blur "
+                f"{blur[id(photo)]:.2f} against the photos' {usual:.2f})")
+    return [p for p in photos if id(p) not in blurred]
 
 
 def check_enough(photos: list[Photo], dropped: Dropped, what: str = "photos") -> None:

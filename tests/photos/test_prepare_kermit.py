@@ -98,3 +98,27 @@ def test_cameras_project_the_colmap_points_where_colmap_does(prepared):
         uv, depth = project(normalised[front], frame.camera)
         assert np.all(depth > 0)
         np.testing.assert_allclose(uv, expected, atol=1e-2)
+
+
+def test_two_photos_upside_down_do_not_tip_kermit_over(tmp_path):
+    """kermit's eleven photos, two of them turned upside down (their EXIF orientation lost):
+    the nine upright ones tell the level, which the scene's up follows (a weak plane 64 degrees
+    off it was delivered before: kermit leaning in every frame)."""
+    from windowshop.photos.verify.upright import angle
+    from windowshop.scene.cameras import upright_level
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for path in sorted(KERMIT.glob("*.jpg")):
+        image = Image.open(path)
+        if path.stem in ("kermit003", "kermit006"):
+            image = image.rotate(180)
+        image.save(photos / path.name, quality=95)
+    assert main(["prepare", str(photos), "--out", str(tmp_path / "scene")]) == 0
+    frames = json.loads((tmp_path / "scene" / "transforms.json").read_text())["frames"]
+    c2ws = np.stack([np.array(f["transform_matrix"]) for f in frames])
+    level, _ = upright_level(c2ws)
+    assert angle(level, np.array([0.0, 0.0, 1.0])) < 5.0
+    centres = c2ws[:, :3, 3]
+    elevations = np.degrees(np.arcsin(centres[:, 2] / np.linalg.norm(centres, axis=1)))
+    assert 10.0 < np.median(elevations) < 35.0  # kermit's photos look down about 20 degrees

@@ -134,6 +134,7 @@ QUARTER_REFINES = 6
 MAX_STEEP_DEG = 70.0  # an up the cameras look along more steeply than this (median) is no up
 QUARTER_KEEP = 0.9  # the share of photos whose level axes decide a quarter-turn up
 UPSIDE_DOWN_DEG = 135.0  # a photo rolled further than this about up is upside down
+UPRIGHT_SHARE = 2.0 / 3.0  # photos upright among some upside down that still tell the level
 # The up axes of photos all turned sideways must turn round their level this much (about 60
 # degrees of arc): upright photos over a narrow arc, misread as sideways about the arc's
 # tangent, turn theirs by 0.022-0.023 (a fruit and a dtu_skull subset, 80-88 deg off);
@@ -170,7 +171,8 @@ def photos_level(c2ws: np.ndarray) -> tuple[np.ndarray, float]:
 def upright_level(c2ws: np.ndarray) -> tuple[np.ndarray, float] | None:
     """(unit up (3,), spread in degrees) by the rule of photos held upright alone, photos_level's
     first: when their right axes agree on a level that they turn round, that the cameras do not
-    look along (MAX_STEEP_DEG) and that no photo is upside down about; or, every photo turned
+    look along (MAX_STEEP_DEG) and that no photo is upside down about (a few among upright ones
+    are left out: UPRIGHT_SHARE of the photos upright decide it); or, every photo turned
     sideways (a walk shot so, its EXIF orientation lost: temple's), when their up axes do so;
     else None.
 
@@ -183,8 +185,15 @@ def upright_level(c2ws: np.ndarray) -> tuple[np.ndarray, float] | None:
         return None
     up, spread, turned = _level_of(c2ws[:, :3, 0])
     up = _signed_by_ups(c2ws, up)
-    if _agreed_upright(c2ws, up, spread, turned) and _held_upright(c2ws, up):
-        return up, spread
+    if _agreed_upright(c2ws, up, spread, turned):
+        if _held_upright(c2ws, up):
+            return up, spread
+        # a few photos upside down (their EXIF orientation lost) among upright ones, and none
+        # sideways, or the right axes would not agree: the upright ones speak for the level (two
+        # of kermit's 11 photos upside down, a weak plane 64 deg off was delivered unchecked)
+        upright = np.abs(rolls(c2ws, up)) <= UPSIDE_DOWN_DEG
+        if upright.sum() >= max(3.0, UPRIGHT_SHARE * len(c2ws)):
+            return upright_level(c2ws[upright])
     # photos all turned sideways are upright ones turned a quarter: their up axes are as level
     # (7 of temple's photos over 100 degrees, a face of the temple taken for the support 80-85
     # deg off, were delivered lying on their side); which way each turned is not known, so up

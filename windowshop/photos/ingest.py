@@ -182,8 +182,8 @@ def blur_of(pixels: np.ndarray) -> float:
 
 
 def drop_blurred(photos: list[Photo], dropped: Dropped, ratio: float = BLUR_RATIO) -> list[Photo]:
-    """The photos less `ratio` times as sharp as the set's median whose blur (blur_of) lies
-    BLUR_EXCESS over the set's are dropped, named; the rest are kept."""
+    """The photos, less those under `ratio` of the set's median sharpness whose blur (blur_of)
+    also lies BLUR_EXCESS over the set's median blur: those are dropped, named."""
     if len(photos) <= MIN_PHOTOS:
         return photos
     median = float(np.median([p.sharpness for p in photos]))

@@ -111,6 +111,22 @@ def test_a_busy_background_gets_no_masks():
     assert objectbox.background_colour(kermit) is None
 
 
+def test_a_photo_too_dark_for_anything_to_stand_out_has_no_plain_background():
+    """kermit's busy desk at a quarter of its light: the border is plain (every pixel near
+    black), but nothing stands out from it, so it is no backdrop to cut the object from (its
+    masks came out empty, and a right capture was refused for its outlines); a dark object on a
+    black cloth still is."""
+    rng = np.random.default_rng(0)
+    photo = np.asarray(Image.open(KERMIT / "kermit000.jpg")).astype(np.float32)
+    dark = np.clip(0.25 * photo + rng.normal(0, 4, photo.shape), 0, 255).astype(np.uint8)
+    band = max(1, round(objectbox.BORDER * min(dark.shape[:2])))
+    border = np.concatenate([dark[:band].reshape(-1, 3), dark[-band:].reshape(-1, 3)])
+    assert np.mean(np.abs(border - np.median(border, 0)).max(-1) <= objectbox.PLAIN_SPREAD) > 0.9
+    assert objectbox.plain_colour(dark) is None
+    pixels, _ = _ring_object(0)
+    assert objectbox.plain_colour((pixels * 0.6).astype(np.uint8)) is not None
+
+
 def test_umeyama_recovers_a_similarity():
     rng = np.random.default_rng(1)
     src = rng.normal(size=(20, 3))

@@ -26,6 +26,9 @@ PLAIN_SPREAD = 40  # border pixels within this (0-255, max over channels) of its
 PLAIN_SHARE = 0.9  # ... for at least this share of the band: a plain background
 PLAIN_VIEWS = 0.8  # masks are made when at least this share of the views has one
 FOREGROUND = 60  # pixels further than this from the background colour are the object's
+# ... and a plain border is a background only when this share of the photo stands out from it:
+# a photo too dark for anything to (kermit's at a quarter of their light) has a plain border too
+STANDS_OUT = 0.01
 
 
 def seen_counts(points: np.ndarray, cameras: list[Camera], inner: float = INNER) -> np.ndarray:
@@ -72,13 +75,17 @@ def object_box(chosen: np.ndarray, cameras: list[Camera], rotation: np.ndarray,
 
 
 def plain_colour(pixels: np.ndarray) -> np.ndarray | None:
-    """(3,) the background colour if the border band of `pixels` (H, W, 3) uint8 is plain."""
+    """(3,) the background colour if the border band of `pixels` (H, W, 3) uint8 is plain and
+    something in the photo stands out from it."""
     band = max(1, round(BORDER * min(pixels.shape[:2])))
     border = np.concatenate([pixels[:band].reshape(-1, 3), pixels[-band:].reshape(-1, 3),
                              pixels[:, :band].reshape(-1, 3), pixels[:, -band:].reshape(-1, 3)])
     colour = np.median(border, axis=0)
     spread = np.abs(border.astype(np.float32) - colour).max(-1)
-    return colour if np.mean(spread <= PLAIN_SPREAD) >= PLAIN_SHARE else None
+    if np.mean(spread <= PLAIN_SPREAD) < PLAIN_SHARE:
+        return None
+    standing = np.abs(pixels.astype(np.float32) - colour).max(-1) > FOREGROUND
+    return colour if standing.mean() >= STANDS_OUT else None
 
 
 def box_region(aabb: np.ndarray, camera: Camera, margin: float = 0.05) -> np.ndarray:

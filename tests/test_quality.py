@@ -78,6 +78,16 @@ def test_trust_names_the_arc_and_heights_the_photos_cover_without_the_doubted_on
     assert not given["checked"] and given["summary"].startswith("not checked")
 
 
+def test_dark_photos_are_named_or_the_light_blamed():
+    from windowshop.quality import advice
+
+    one = advice({"dark": ["IMG_2.jpg"], "photos": 12, "placed": 12})
+    assert any(t.startswith("photo IMG_2.jpg is dark: more light") for t in one)
+    most = advice({"dark": [f"IMG_{i}.jpg" for i in range(7)], "photos": 12, "placed": 12})
+    assert any(t.startswith("the photos are dark: more light") for t in most)
+    assert not any("dark" in t for t in advice({"dark": [], "photos": 12, "placed": 12}))
+
+
 def test_a_photo_alone_across_an_empty_arc_is_left_out_of_the_trusted_arc():
     from windowshop.quality import advice, empty_arcs, trust
 

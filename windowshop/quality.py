@@ -53,6 +53,12 @@ def advice(report: dict) -> list[str]:
     if blurred:
         tips.append(f"{_names(blurred)} {'is' if len(blurred) == 1 else 'are'} blurred: hold the "
                     "phone still or use more light")
+    dark = report.get("dark", [])
+    if dark:  # most of them: the light, not a photo
+        which = ("the photos are" if len(dark) > report.get("photos", 0) / 2
+                 else f"{_names(dark)} {'is' if len(dark) == 1 else 'are'}")
+        tips.append(f"{which} dark: more light, or tap the object on the phone's screen so that "
+                    "it sets the exposure by it")
     for start, end in report.get("empty_arcs", []):
         tips.append(f"no photos between {start:.0f}° and {end:.0f}° around the object: walk that "
                     "side again")
@@ -94,6 +100,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "placed": (prepared or {}).get("placed", len(scene.views)),
         "unplaced": (prepared or {}).get("unplaced", []),
         "dropped": (prepared or {}).get("dropped", {}),
+        "dark": (prepared or {}).get("dark", []),
         "masks": (prepared or {}).get("masks", "alpha" if scene.background == "alpha" else "none"),
         "train_photos": len(train),
         "held_out_photos": metrics.get("test_views", 0),

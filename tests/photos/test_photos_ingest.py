@@ -107,6 +107,14 @@ def test_a_sharp_photo_of_plainer_things_is_not_called_blurred(tmp_path, monkeyp
     assert "IMG_3650.jpg" in alone.reasons
 
 
+def test_a_photo_with_too_little_light_is_underexposed_and_a_black_backdrop_is_not():
+    photo = np.asarray(Image.open(KERMIT / "kermit000.jpg"))
+    assert not ingest.underexposed(photo)
+    assert ingest.underexposed((0.25 * photo).astype(np.uint8))  # a quarter of the light
+    temple = np.asarray(Image.open(DATA / "temple_sparse" / "templeSR0001.png").convert("RGB"))
+    assert np.median(temple) < 30 and not ingest.underexposed(temple)  # bright on black
+
+
 def test_fewer_than_five_usable_photos(tmp_path):
     files = sorted(KERMIT.glob("*.jpg"))[:4]
     copy = tmp_path / "copy.jpg"

@@ -28,6 +28,10 @@ BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median cou
 # object among kermit's, 0.03 under it)
 BLUR_EXCESS = 0.03
 BLUR_SAMPLE = 9  # photos whose blur gives the set's median (evenly spaced), besides the suspects
+# a photo whose brightest 1% lies under this share of white was taken with too little light (the
+# shared captures' lie at 0.52-1.0, black backdrops included; kermit's at a quarter of their
+# light, 0.21-0.23): its masks and colours suffer, which the advice says
+DARK = 0.35
 
 @dataclass
 class Photo:
@@ -136,6 +140,12 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
     pixels = np.asarray(rgb, dtype=np.uint8)
     return Photo(name=path.stem, source=path, pixels=pixels, scale=rgb.size[0] / width,
                  camera_key=key, sharpness=sharpness(pixels))
+
+
+def underexposed(pixels: np.ndarray) -> bool:
+    """Whether the photo (H, W, 3) uint8 is too dark: its brightest 1% (every other pixel) under
+    DARK of white."""
+    return float(np.percentile(pixels[::2, ::2].mean(-1), 99)) < DARK * 255
 
 
 def sharpness(pixels: np.ndarray) -> float:

@@ -31,7 +31,8 @@ from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
                                orient, segment, sensors)
 from windowshop.photos.frames import sample_frames
-from windowshop.photos.ingest import Dropped, Inputs, Photo, check_enough, gather_inputs, read_photos
+from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gather_inputs,
+                                     read_photos, underexposed)
 from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
@@ -333,6 +334,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
+        "dark": [_shown(p) for p in photos if underexposed(p.pixels)],
         "unplaced": unplaced, "estimated_from_ring": ring,
         "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring)),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),

@@ -32,6 +32,8 @@ def summary_lines(report: dict) -> list[str]:
     lines = [(f"placed {report['placed']} of {report['used']} photos "
               f"(mean reprojection error {report['reprojection_error_px']:.2f} px)")]
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
+    if report.get("dark"):
+        lines.append(f"  dark (too little light): {len(report['dark'])} of {report['used']} photos")
     ring = report.get("estimated_from_ring", {})
     if ring:
         lines.append(f"  estimated from the ring of the others, not measured: {', '.join(ring)}")

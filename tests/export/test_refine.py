@@ -167,6 +167,9 @@ def test_each_photos_exposure_is_found_and_kept_out_of_the_texture(monkeypatch):
     np.testing.assert_allclose(found, gains / np.median(gains), rtol=1e-9)
     glaring = np.where(photo[:, None] == 1, 5.0 * drawn, drawn)  # a photo five times as bright
     assert refine.exposures(drawn, glaring, photo, 5)[1] == refine.MAX_GAIN
+    blind = refine.exposures(drawn, drawn * gains[photo][:, None], photo, 7)  # 5, 6 see nothing
+    np.testing.assert_allclose(blind[:5], gains / np.median(gains), rtol=1e-9)
+    assert blind[5] == blind[6] == 1.0 / np.median(gains)
 
     truth = 0.8 * true_texture()
     shots = photos(truth)

@@ -196,13 +196,14 @@ def exposures(drawn: np.ndarray, colour: np.ndarray, photo: np.ndarray, count: i
               ) -> np.ndarray:
     """(count,) each photo's gain: the factor by which the texture `drawn` (P, 3) at its pixels
     best matches their `colour` (P, 3) (least squares; `photo` (P,) the pixels' photos), held to
-    MAX_GAIN either way and scaled to a median of 1 (the texture keeps the exposure most photos
-    have)."""
+    MAX_GAIN either way and scaled so that the photos that see the mesh have a median of 1 (the
+    texture keeps the exposure most photos have)."""
     both = np.bincount(photo, (drawn * colour).sum(1), minlength=count)
     drawn_only = np.bincount(photo, (drawn * drawn).sum(1), minlength=count)
-    gain = np.where(drawn_only > 0, both / np.maximum(drawn_only, 1e-12), 1.0)
-    gain = np.clip(gain, 1.0 / MAX_GAIN, MAX_GAIN)
-    return gain / np.median(gain)
+    seen = drawn_only > 0  # a photo that sees none of the mesh has no pixels and no say
+    gain = np.ones(count)
+    gain[seen] = np.clip(both[seen] / drawn_only[seen], 1.0 / MAX_GAIN, MAX_GAIN)
+    return gain / (np.median(gain[seen]) if seen.any() else 1.0)
 
 
 def chart_differences(uv: np.ndarray, faces: np.ndarray, size: int, used: np.ndarray

@@ -30,3 +30,25 @@ def test_summary_names_the_photos_the_ring_placed():
     lines = summary_lines(report)
     assert "not measured: c.jpg, f.jpg" in lines[1]
     assert [line.strip() for line in lines[2:]] == ["c.jpg: retake it", "f.jpg: retake it too"]
+
+
+def test_a_refusal_names_the_light_when_most_photos_are_dark():
+    import pytest
+
+    from windowshop.errors import UserError
+    from windowshop.media import Refused
+    from windowshop.photos.prepare import _light_blamed
+
+    dark = [f"IMG_{i}.jpg" for i in range(8)]
+    with pytest.raises(UserError) as refused:
+        with _light_blamed(dark, 10):
+            raise UserError("only 3 of 10 photos could be placed")
+    assert str(refused.value).startswith("only 3 of 10 photos could be placed\n")
+    assert "8 of 10 photos are dark: more light" in str(refused.value)
+    with pytest.raises(UserError) as refused:
+        with _light_blamed(dark[:3], 10):  # a few dark photos are not the likeliest cause
+            raise UserError("only 3 of 10 photos could be placed")
+    assert str(refused.value) == "only 3 of 10 photos could be placed"
+    with pytest.raises(Refused):  # an error of its own kind passes as it is
+        with _light_blamed(dark, 10):
+            raise Refused("too_big", "the upload is too large")

@@ -13,6 +13,7 @@ The user's files are only read; all scratch work happens in a temporary folder.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import shutil
@@ -323,8 +324,8 @@ def _write(out_dir: Path, image_dir: Path, pixels: dict[str, np.ndarray], sfm: S
                                         near_far, found.background, bool(found.masks), str(source))
 
 
-def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped, sfm: SfmResult,
-            found: Located, stages: Stages) -> dict:
+def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
+            dark: list[str], sfm: SfmResult, found: Located, stages: Stages) -> dict:
     by_name = {p.name: p for p in photos}
     def shown(name: str) -> str:
         return _shown(by_name[name.rsplit(".", 1)[0]])
@@ -334,7 +335,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
-        "dark": [_shown(p) for p in photos if underexposed(p.pixels)],
+        "dark": dark,
         "unplaced": unplaced, "estimated_from_ring": ring,
         "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring)),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
@@ -395,35 +396,60 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         work = Path(tmp)
         inputs = gather_inputs(source, work)
         photos, dropped = _read(inputs, options, stages)
-        priors = _priors(inputs, photos)
-        settings = _settings(inputs, photos, options, priors)
-        image_dir = work / "images"
-        image_dir.mkdir()
-        for photo in photos:  # as structure from motion sees them (windowshop.photos.orient)
-            turn = f"{photo.name}.jpg" in settings.turned
-            output.write_image(work, photo.name,
-                               orient.for_sfm(photo.pixels) if turn else photo.pixels)
-        pixels = {f"{p.name}.jpg": p.pixels for p in photos}  # by image file name, as taken
-        sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
-        matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
-        shown = {f"{p.name}.jpg": _shown(p) for p in photos}
-        check_placed(sfm, len(photos), shown)
-        with stages.stage("finding and checking the object"):
-            choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos), options,
-                             shown)
-        sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
-        with stages.stage("writing the scene", len(found.photos)) as advance:
-            transforms = _write(out_dir, image_dir, pixels, sfm, found, source, advance)
-        summary = _report(source, inputs, photos, dropped, sfm, found, stages)
-        summary["verification"] = _verification(choice, options.force)
-        summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
-                                             found.plane is not None,
-                                             matcher)
+        dark = [_shown(p) for p in photos if underexposed(p.pixels)]
+        with _light_blamed(dark, len(photos)):
+            transforms, summary = _pose(source, out_dir, work, inputs, photos, dropped, dark,
+                                        options, stages)
     report.write_report(out_dir, summary)
     if show:
         print("\n".join(report.summary_lines(summary) + [f"scene written to {out_dir}"]),
               file=sys.stderr)
     return PrepareResult(out_dir=out_dir, transforms=transforms, report=summary)
+
+
+def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[Photo],
+          dropped: Dropped, dark: list[str], options: PrepareOptions, stages: Stages
+          ) -> tuple[Path, dict]:
+    """Structure from motion, the hypotheses and the verifier's choice, written to `out_dir`:
+    (transforms.json's path, the report)."""
+    priors = _priors(inputs, photos)
+    settings = _settings(inputs, photos, options, priors)
+    image_dir = work / "images"
+    image_dir.mkdir()
+    for photo in photos:  # as structure from motion sees them (windowshop.photos.orient)
+        turn = f"{photo.name}.jpg" in settings.turned
+        output.write_image(work, photo.name,
+                           orient.for_sfm(photo.pixels) if turn else photo.pixels)
+    pixels = {f"{p.name}.jpg": p.pixels for p in photos}  # by image file name, as taken
+    sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
+    matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
+    shown = {f"{p.name}.jpg": _shown(p) for p in photos}
+    check_placed(sfm, len(photos), shown)
+    with stages.stage("finding and checking the object"):
+        choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos), options,
+                         shown)
+    sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
+    with stages.stage("writing the scene", len(found.photos)) as advance:
+        transforms = _write(out_dir, image_dir, pixels, sfm, found, source, advance)
+    summary = _report(source, inputs, photos, dropped, dark, sfm, found, stages)
+    summary["verification"] = _verification(choice, options.force)
+    summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
+                                         found.plane is not None,
+                                         matcher)
+    return transforms, summary
+
+
+@contextlib.contextmanager
+def _light_blamed(dark: list[str], count: int):
+    """A refusal that also names the light when most of the `count` photos are `dark`: the
+    likeliest cause of whatever failed (masks, matches)."""
+    try:
+        yield
+    except UserError as err:
+        if type(err) is not UserError or len(dark) <= count / 2:
+            raise
+        raise UserError(f"{err}\n{len(dark)} of {count} photos are dark: more light, or tap the "
+                        "object on the phone's screen so that it sets the exposure by it") from err
 
 
 def check_intrinsics(values: tuple | None) -> None:

@@ -153,7 +153,8 @@ def build_asset(run_dir: str | Path, options: ExportOptions = ExportOptions(),
             lap("hold")
         if every_photo is not None and options.refine:
             image = refine_texture(unwrapped.vertices, unwrapped.faces, unwrapped.uv, image,
-                                   every_photo, estimated=estimated)
+                                   every_photo, estimated=estimated,
+                                   texel_faces=unwrapped.texel_faces(image.shape[0]))
             lap("refine")
         texture = tex.finish_texture(image)
         surface = unwrapped

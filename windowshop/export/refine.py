@@ -157,10 +157,12 @@ def conjugate_gradients(apply, rhs: np.ndarray, iterations: int) -> np.ndarray:
 
 
 def refine_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, image: np.ndarray,
-                   photos: Photos, estimated: bool = False) -> np.ndarray:
+                   photos: Photos, estimated: bool = False,
+                   texel_faces: np.ndarray | None = None) -> np.ndarray:
     """(S, S, 3) float32: the texture `image` (S, S, 3) in [0, 1] of the mesh `vertices` (V, 3),
     `faces` (F, 3), `uv` (V, 2) (glTF's), refined against `photos`, whose masks are
-    `estimated` from them or given with them (see the module docstring)."""
+    `estimated` from them or given with them (see the module docstring); `texel_faces` (S, S)
+    the face under each texel, when the bake has it (texture.Unwrapped.texel_faces)."""
     size = image.shape[0]
     a, target, photo = system(vertices, faces, uv, photos, size, estimated)
     used = np.flatnonzero(np.asarray(a.getnnz(0)) > 0)  # texels no pixel reads stay as baked
@@ -168,7 +170,7 @@ def refine_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, imag
     start = image.reshape(-1, 3).astype(np.float64)
     smooth = None
     if SMOOTH > 0:
-        differences = chart_differences(uv, faces, size, used)
+        differences = chart_differences(uv, faces, size, used, texel_faces)
         smooth = (SMOOTH * (differences.T @ differences)).tocsr()
 
     def solve(drawing: sparse.csr_matrix) -> np.ndarray:
@@ -206,12 +208,13 @@ def exposures(drawn: np.ndarray, colour: np.ndarray, photo: np.ndarray, count: i
     return gain / (np.median(gain[seen]) if seen.any() else 1.0)
 
 
-def chart_differences(uv: np.ndarray, faces: np.ndarray, size: int, used: np.ndarray
-                      ) -> sparse.csr_matrix:
+def chart_differences(uv: np.ndarray, faces: np.ndarray, size: int, used: np.ndarray,
+                      texel_faces: np.ndarray | None = None) -> sparse.csr_matrix:
     """D (pairs, len(used)), +1 and -1 a row: the differences between side-by-side `used` texels
     (flat indices into the `size` x `size` texture) whose centres lie on one chart, the faces
     (F, 3) an unwrapped mesh joins through shared vertices (texture.unwrap splits them where
-    charts meet, so texels side by side in two charts lie apart on the surface)."""
+    charts meet, so texels side by side in two charts lie apart on the surface); `texel_faces`
+    (size, size) the face under each texel's centre, rasterised here when not given."""
     from windowshop.export.texture import rasterise
 
     corners = len(uv)
@@ -219,7 +222,7 @@ def chart_differences(uv: np.ndarray, faces: np.ndarray, size: int, used: np.nda
                                (np.repeat(faces[:, 0], 2), faces[:, 1:].reshape(-1))),
                               shape=(corners, corners))
     vertex_chart = csgraph.connected_components(links, directed=False)[1]
-    ids = rasterise(uv, faces, size)
+    ids = rasterise(uv, faces, size) if texel_faces is None else texel_faces
     chart = np.where(ids >= 0, vertex_chart[faces[np.maximum(ids, 0), 0]], -1)
     column = np.full(size * size, -1)
     column[used] = np.arange(len(used))

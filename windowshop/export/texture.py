@@ -22,7 +22,7 @@ reads the background.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -50,6 +50,14 @@ class Unwrapped:
     normals: np.ndarray  # (V', 3) unit
     uv: np.ndarray  # (V', 2) in [0, 1], glTF's convention: v = 0 at the image's top row
     source: np.ndarray  # (V',) the vertex of the unsplit mesh each vertex is a copy of
+    # texel_faces by size: the bake and the refinement read the same (moved keeps uv and faces)
+    _texel_faces: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def texel_faces(self, size: int) -> np.ndarray:
+        """(size, size) int64: the face under each texel's centre (-1: none), rasterise's."""
+        if size not in self._texel_faces:
+            self._texel_faces[size] = rasterise(self.uv, self.faces, size)
+        return self._texel_faces[size]
 
 
 def moved(unwrapped: Unwrapped, mesh: Mesh) -> Unwrapped:
@@ -220,7 +228,7 @@ def bake_image(model: RadianceModel, unwrapped: Unwrapped, size: int,
     (N, 3) points -> (N,) weights in [0, 1]: how far a point lies in the side no photo saw,
     where the colour fades to a neutral grey (unseen.neutral_colour)."""
     bake = size if photos is None else bake_size(unwrapped, size, photos)
-    ids = rasterise(unwrapped.uv, unwrapped.faces, bake)
+    ids = unwrapped.texel_faces(bake)
     index, points, normals = texel_surface(unwrapped, ids)
     image = np.zeros((bake * bake, 3), dtype=np.float32)
     image[index] = surface_colour(model, points, normals, depths, photos, tolerance,

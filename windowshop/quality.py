@@ -59,6 +59,10 @@ def advice(report: dict) -> list[str]:
                  else f"{_names(dark)} {'is' if len(dark) == 1 else 'are'}")
         tips.append(f"{which} dark: more light, or tap the object on the phone's screen so that "
                     "it sets the exposure by it")
+    if report.get("cropped"):
+        tips.append("the cut-outs are cropped to the object, so where each photo was aimed is lost "
+                    "and the cameras are placed less precisely: save them at the photos' full "
+                    "size, or give the photos themselves")
     for start, end in report.get("empty_arcs", []):
         tips.append(f"no photos between {start:.0f}° and {end:.0f}° around the object: walk that "
                     "side again")
@@ -101,6 +105,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "unplaced": (prepared or {}).get("unplaced", []),
         "dropped": (prepared or {}).get("dropped", {}),
         "dark": (prepared or {}).get("dark", []),
+        "cropped": (prepared or {}).get("cropped", []),
         "masks": (prepared or {}).get("masks", "alpha" if scene.background == "alpha" else "none"),
         "train_photos": len(train),
         "held_out_photos": metrics.get("test_views", 0),

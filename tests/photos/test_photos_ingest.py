@@ -42,6 +42,31 @@ def test_resized_to_working_size_with_scale():
     assert photo.name == "kermit000"
 
 
+def test_a_cut_out_is_laid_on_grey_and_keeps_its_outline(tmp_path):
+    """A PNG whose background was removed (transparent, black under it, as background removers
+    leave it): the backdrop's grey where it is clear, the opaque part as the cut-out, both at
+    working size."""
+    pixels = _pattern(128, 96)
+    alpha = np.zeros((96, 128), np.uint8)
+    alpha[20:70, 30:90] = 255
+    Image.fromarray(np.dstack([pixels * (alpha[..., None] > 0), alpha])).save(tmp_path / "c.png")
+    photo = ingest.read_photo(tmp_path / "c.png", max_side=64)
+    assert photo.pixels.shape == (48, 64, 3)
+    expected = np.zeros((48, 64), bool)
+    expected[10:35, 15:45] = True
+    np.testing.assert_array_equal(photo.cutout, expected)
+    far = np.ones((48, 64), bool)  # clear, 4 pixels or more from the outline (Lanczos' reach)
+    far[6:39, 11:49] = False
+    assert (photo.pixels[far] == ingest.BACKDROP).all()
+    np.testing.assert_allclose(photo.pixels[12:33, 17:43].mean((0, 1)),
+                               pixels[24:66, 34:86].mean((0, 1)), atol=3)
+    # an opaque alpha channel (a screenshot) cuts nothing out
+    Image.fromarray(np.dstack([pixels, np.full((96, 128), 255, np.uint8)])).save(tmp_path / "o.png")
+    opaque = ingest.read_photo(tmp_path / "o.png", max_side=None)
+    assert opaque.cutout is None
+    np.testing.assert_array_equal(opaque.pixels, pixels)
+
+
 @pytest.mark.skipif(not media.HEIF, reason="pillow-heif is not installed")
 def test_heic_photo_is_read(tmp_path):
     Image.open(KERMIT / "kermit000.jpg").save(tmp_path / "k.heic", quality=90)

@@ -13,6 +13,7 @@ from PIL import Image
 
 from windowshop.config import PrepareOptions
 from windowshop.photos.prepare import prepare
+from windowshop.quality import advice
 from windowshop.scene import read_source
 from shared_data import DATA
 
@@ -63,3 +64,42 @@ def test_the_skull_stands_upright_on_the_table(skull):
     assert np.median(table[:, 2]) == pytest.approx(floor, abs=0.05)
     heights = np.array([f.camera.center[2] for f in read_source(skull.out_dir).frames])
     assert np.all(heights > np.median(table[:, 2]))  # the lowest views graze the table
+
+
+def _cut_out(folder, crop: bool = False):
+    """12 of the photos as PNGs whose background a remover took away (transparent, black under
+    it), cropped to the object and 10 pixels round it if `crop`."""
+    folder.mkdir()
+    files = sorted((SKULL / "images").glob("*.jpg"))
+    for i in np.linspace(0, len(files) - 1, 12).round().astype(int):
+        rgb = np.asarray(Image.open(files[i]).convert("RGB"))
+        alpha = np.asarray(Image.open(SKULL / "masks" / f"{files[i].stem}.png").convert("L")) > 127
+        cut = np.dstack([rgb * alpha[..., None], np.where(alpha, 255, 0)]).astype(np.uint8)
+        if crop:
+            ys, xs = np.nonzero(alpha)
+            cut = cut[max(ys.min() - 10, 0):ys.max() + 11, max(xs.min() - 10, 0):xs.max() + 11]
+        Image.fromarray(cut).save(folder / f"{files[i].stem}.png")
+    return folder
+
+
+def test_photos_cut_out_by_their_owner_keep_their_outlines(tmp_path):
+    """Their transparency is their mask, as drawn, and the object is still placed upright."""
+    result = prepare(_cut_out(tmp_path / "photos"), tmp_path / "scene",
+                     PrepareOptions(max_side=320), show=False)
+    assert result.report["masks"] == "given" and not result.report["cropped"]
+    assert len(result.report["views"]) >= 10
+    for view in result.report["views"]:
+        mask = np.asarray(Image.open(result.out_dir / "masks" / f"{view['name']}.png")) > 127
+        truth = Image.open(SKULL / "masks" / f"{view['name']}.png").convert("L")
+        truth = np.asarray(truth.resize(mask.shape[::-1], Image.BILINEAR)) > 127
+        assert (mask & truth).sum() / (mask | truth).sum() > 0.97, view["name"]
+    heights = np.array([f.camera.center[2] for f in read_source(result.out_dir).frames])
+    assert np.all(heights > 0)  # seen from above, as the photos were taken
+
+
+def test_cut_outs_cropped_to_the_object_are_named_with_what_to_do(tmp_path):
+    result = prepare(_cut_out(tmp_path / "photos", crop=True), tmp_path / "scene",
+                     PrepareOptions(max_side=320), show=False)
+    assert len(result.report["cropped"]) == 12
+    tips = advice(result.report)
+    assert any("cropped to the object" in tip and "full size" in tip for tip in tips)

@@ -2,7 +2,9 @@
 
 Photos are decoded with Pillow (HEIC/HEIF through pillow-heif), turned upright by their EXIF
 orientation and resized; the user's files are only ever read. Exact duplicates and very blurred
-photos are dropped and named, so the user knows which.
+photos are dropped and named, so the user knows which. A photo whose transparency cuts the object
+out (a PNG from a background remover or a phone's "lift subject") is laid on grey, and its
+transparency kept as the object's outline.
 """
 
 from __future__ import annotations
@@ -32,6 +34,13 @@ BLUR_SAMPLE = 9  # photos whose blur gives the set's median (evenly spaced), bes
 # shared captures' lie at 0.52-1.0, black backdrops included; kermit's at a quarter of their
 # light, 0.21-0.23): its masks and colours suffer, which the advice says
 DARK = 0.35
+# a photo counts as a cut-out when at least this share of it is transparent (alpha under half):
+# an opaque PNG (a screenshot's alpha all 255) or a few clear corner pixels is not one
+CUTOUT_SHARE = 0.01
+# what a cut-out is laid on: its outline's corners are features too, and grey leaves a light
+# object's outline as clear as a dark one's (dtu_skull's 12 photos cut out by their hand-made
+# masks: 12 placed on black or grey, 11 on white; bench/RESULTS.md, stop 58)
+BACKDROP = (128, 128, 128)
 
 @dataclass
 class Photo:
@@ -43,6 +52,7 @@ class Photo:
     scale: float  # working pixels per pixel of the upright original
     camera_key: tuple = ()  # photos with equal keys come from one camera (EXIF make, model, focal)
     sharpness: float = 0.0
+    cutout: np.ndarray | None = None  # (H, W) bool, the opaque pixels of a cut-out (see above)
 
 
 @dataclass
@@ -125,7 +135,7 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
             image.load()
             upright = ImageOps.exif_transpose(image)
             key = _camera_key(image, upright.size)
-            rgb = upright.convert("RGB")
+            rgb, alpha = _laid_on_backdrop(upright)
     except UnidentifiedImageError as err:
         raise UserError(f"{path}: not an image (its contents are not a photo format we read); "
                         f"remove it from the input") from err
@@ -135,11 +145,25 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
     width, height = rgb.size
     scale = 1.0 if max_side is None else min(1.0, max_side / max(width, height))
     if scale < 1.0:
-        rgb = rgb.resize((max(1, round(width * scale)), max(1, round(height * scale))),
-                         Image.Resampling.LANCZOS)
+        size = (max(1, round(width * scale)), max(1, round(height * scale)))
+        rgb = rgb.resize(size, Image.Resampling.LANCZOS)
+        alpha = None if alpha is None else alpha.resize(size, Image.Resampling.BILINEAR)
     pixels = np.asarray(rgb, dtype=np.uint8)
+    cutout = None if alpha is None else np.asarray(alpha) >= 128
+    if cutout is not None and (1.0 - cutout.mean() < CUTOUT_SHARE or not cutout.any()):
+        cutout = None
     return Photo(name=path.stem, source=path, pixels=pixels, scale=rgb.size[0] / width,
-                 camera_key=key, sharpness=sharpness(pixels))
+                 camera_key=key, sharpness=sharpness(pixels), cutout=cutout)
+
+
+def _laid_on_backdrop(image: Image.Image) -> tuple[Image.Image, Image.Image | None]:
+    """(the RGB image, laid on BACKDROP where it is transparent; its alpha (L), or None when it
+    has no transparency). The colour under a clear pixel is whatever the tool left there."""
+    if image.mode not in ("RGBA", "LA", "PA") and "transparency" not in image.info:
+        return image.convert("RGB"), None
+    rgba = image.convert("RGBA")
+    backdrop = Image.new("RGBA", rgba.size, BACKDROP + (255,))
+    return Image.alpha_composite(backdrop, rgba).convert("RGB"), rgba.getchannel("A")
 
 
 def underexposed(pixels: np.ndarray) -> bool:

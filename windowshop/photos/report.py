@@ -32,6 +32,9 @@ def summary_lines(report: dict) -> list[str]:
     lines = [(f"placed {report['placed']} of {report['used']} photos "
               f"(mean reprojection error {report['reprojection_error_px']:.2f} px)")]
     lines += [f"  dropped {name}: {why}" for name, why in report["dropped"].items()]
+    if report.get("cropped"):
+        lines.append(f"  cut-outs cropped to the object: {len(report['cropped'])} of "
+                     f"{report['used']} photos")
     if report.get("dark"):
         lines.append(f"  dark (too little light): {len(report['dark'])} of {report['used']} photos")
     ring = report.get("estimated_from_ring", {})
@@ -42,7 +45,7 @@ def summary_lines(report: dict) -> list[str]:
     if report["unplaced"] or ring:
         lines += [f"    {name}: {advice}" for name, advice in report.get("reshoot", {}).items()]
     if report["masks"] != "none":
-        how = {"colour": "the plain background", "segmented": "colour, seeded by the object's "
+        how = {"given": "the photos' own transparency", "colour": "the plain background", "segmented": "colour, seeded by the object's "
                "points above the surface it stands on", "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
     if report.get("priors", {}).get("capture"):

@@ -6,7 +6,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from PIL import Image, ImageFilter
+from PIL import Image, ImageFilter, ImageOps
 
 from windowshop import media
 from windowshop.errors import UserError
@@ -33,6 +33,22 @@ def test_exif_orientation_is_applied(tmp_path):
     photo = ingest.read_photo(tmp_path / "side.png", max_side=None)
     assert photo.pixels.shape == pixels.shape
     np.testing.assert_array_equal(photo.pixels, pixels)
+
+
+def test_a_large_jpeg_shrunk_while_decoding_matches_the_whole_photo_shrunk(tmp_path):
+    """JPEG's reduced decoding (Image.draft) of a photo stored sideways gives the working-size
+    photo that decoding it whole and shrinking would give, with the scale and size of the whole."""
+    upright = Image.open(KERMIT / "kermit000.jpg").resize((1200, 1600), Image.Resampling.BICUBIC)
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    upright.transpose(Image.Transpose.ROTATE_90).save(tmp_path / "big.jpg", quality=95, exif=exif)
+    photo = ingest.read_photo(tmp_path / "big.jpg", max_side=320)
+    with Image.open(tmp_path / "big.jpg") as whole:
+        expected = ImageOps.exif_transpose(whole).convert("RGB")
+    expected = np.asarray(expected.resize((240, 320), Image.Resampling.LANCZOS), np.float32)
+    assert photo.pixels.shape == (320, 240, 3)
+    assert photo.scale == pytest.approx(0.2) and photo.camera_key[-1] == (1200, 1600)
+    assert np.abs(photo.pixels - expected).mean() < 2.0
 
 
 def test_resized_to_working_size_with_scale():

@@ -3,11 +3,12 @@ beer_can video (given as the video, then as a folder of photos: the matcher is p
 order), all 78 of fruit's photos, and with `--figure N` N rendered 800x800 photos of a plain
 figure on a granite table (windowshop.scene.products.figure_on_granite; every photo rich in the
 table's features, the issue 35 case; rendered once, about 4 minutes for 88, and kept under
-~/.cache/windowshop/bench), with `--phone` kermit's photos enlarged to a 12-megapixel phone's
-4032x3024 (EXIF kept; the reading stage is what a phone's photos cost), as JSON.
+~/.cache/windowshop/bench), with `--phone jpg heic` kermit's photos enlarged to a 12-megapixel
+phone's 4032x3024 in those formats (EXIF kept; the reading stage is what a phone's photos cost),
+as JSON.
 
-    python bench/bench_prepare.py [--max-side 640] [--frames 80] [--figure 88] [--phone] [--video]
-                                  [--out results.json]
+    python bench/bench_prepare.py [--max-side 640] [--frames 80] [--figure 88] [--phone jpg heic]
+                                  [--video] [--out results.json]
     python bench/cpu_profile.py ordinary python bench/bench_prepare.py --figure 88
 
 `--video` also times `windowshop video` end to end (prepare, fit, render) on the 14 photos with
@@ -52,15 +53,18 @@ def figure_photos(count: int) -> Path:
     return folder / "images"
 
 
-def phone_photos(folder: Path) -> Path:
-    """kermit's 11 photos as a 12-megapixel phone would save them (4032x3024 JPEG, EXIF kept)."""
+def phone_photos(folder: Path, suffix: str) -> Path:
+    """kermit's 11 photos as a 12-megapixel phone would save them (4032x3024, EXIF kept), as
+    JPEG or HEIC (`suffix`)."""
     from PIL import Image
+
+    import windowshop.media  # noqa: F401  (registers pillow-heif's HEIC writer)
 
     folder.mkdir()
     for path in sorted((DATA / "kermit").glob("*.jpg")):
         with Image.open(path) as image:
             big = image.resize((4032, 3024), Image.Resampling.BICUBIC)
-            big.save(folder / path.name, quality=92, exif=image.getexif())
+            big.save(folder / f"{path.stem}.{suffix}", quality=90, exif=image.getexif())
     return folder
 
 
@@ -82,8 +86,8 @@ def main() -> None:
                         help="frames sampled from beer_can's video (0: no video row)")
     parser.add_argument("--figure", type=int, default=0,
                         help="photos of the rendered figure on granite (0: no such row)")
-    parser.add_argument("--phone", action="store_true",
-                        help="also kermit's photos at a phone's 12 megapixels")
+    parser.add_argument("--phone", nargs="*", default=[], choices=["jpg", "heic"],
+                        help="also kermit's photos at a phone's 12 megapixels, in these formats")
     parser.add_argument("--video", action="store_true",
                         help="also time `windowshop video` on the 20 photos")
     parser.add_argument("--out", default=None, help="also write the JSON here")
@@ -99,9 +103,9 @@ def main() -> None:
             results[f"beer_can_photos_{args.frames}"] = timed_prepare(
                 tmp / "beer_video" / "images", tmp / "beer_photos", frames)
         results["kermit"] = timed_prepare(DATA / "kermit", tmp / "kermit", options)
-        if args.phone:
-            results["kermit_12mp"] = timed_prepare(phone_photos(tmp / "kermit_12mp"),
-                                                   tmp / "kermit_big", options)
+        for suffix in args.phone:
+            results[f"kermit_12mp_{suffix}"] = timed_prepare(
+                phone_photos(tmp / f"kermit_{suffix}", suffix), tmp / f"kermit_big_{suffix}", options)
         results["fruit_78"] = timed_prepare(DATA / "fruit" / "newfruit_small", tmp / "fruit", options)
         if args.figure:
             results[f"figure_on_granite_{args.figure}"] = timed_prepare(

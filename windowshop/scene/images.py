@@ -85,9 +85,16 @@ def resize(array: np.ndarray, width: int, height: int) -> np.ndarray:
     return out[..., 0] if array.ndim == 2 else out
 
 
-def parallel_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
-    """[fn(x) for x in items] on a thread pool (Pillow and numpy release the GIL while decoding)."""
+def parallel_map(fn: Callable[[T], R], items: Sequence[T],
+                 advance: Callable[[int], object] = lambda n=1: None) -> list[R]:
+    """[fn(x) for x in items] on a thread pool (Pillow and numpy release the GIL while decoding);
+    `advance(1)` is called in the calling thread as each result comes, in order."""
     if len(items) < 2:
-        return [fn(x) for x in items]
+        return [_advanced(fn(x), advance) for x in items]
     with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1, len(items))) as pool:
-        return list(pool.map(fn, items))
+        return [_advanced(result, advance) for result in pool.map(fn, items)]
+
+
+def _advanced(result: R, advance: Callable[[int], object]) -> R:
+    advance(1)
+    return result

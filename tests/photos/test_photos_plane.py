@@ -121,6 +121,29 @@ def test_a_wall_behind_the_object_is_no_support_for_upright_photos():
     assert isolated.plane is None and isolated.up[2] > 0.95
 
 
+def test_the_floor_is_found_under_an_object_before_a_wall_richer_in_points():
+    """A can on a tiled floor against a tiled wall, photographed upright from in front: the
+    wall holds more points than the floor, so it is the likeliest plane; the photos rule it out,
+    and the floor, the likeliest of the planes they allow, is the support."""
+    rng = np.random.default_rng(7)
+    blob = rng.normal(size=(300, 3))
+    blob = 0.4 * blob / np.linalg.norm(blob, axis=1, keepdims=True) + [0.0, 0.0, 0.45]
+    wall = np.column_stack([rng.uniform(-2, 2, 1500), np.full(1500, 1.0), rng.uniform(0, 2, 1500)])
+    disk = rng.uniform([-2, -2], [2, 1], size=(600, 2))
+    disk = disk[np.linalg.norm(disk, axis=1) > 0.45]
+    floor = np.column_stack([disk, rng.normal(0, 0.005, len(disk))])
+    cameras = [_rolled(4 * np.array([np.sin(a), -np.cos(a), 0.6]), np.array([0, 0, 0.45]),
+                       np.array([0.0, 0.0, 1.0]), rng.uniform(-10, 10))
+               for a in np.linspace(-0.8, 0.8, 9)]
+    points = np.concatenate([blob, wall, floor])
+    wall_first = plane.fit_support_plane(points, cameras)
+    assert wall_first is not None and abs(wall_first.normal[1]) > 0.99  # the wall wins alone
+    isolated = plane.isolate(points, cameras)
+    assert isolated.plane is not None and isolated.up_source == "plane"
+    assert np.degrees(np.arccos(min(1.0, isolated.up[2]))) < 2.0
+    assert (isolated.index < len(blob)).sum() > 0.5 * len(blob)
+
+
 def _face_and_back(rng: np.random.Generator) -> np.ndarray:
     """(P, 3) points of an object whose textured front face (the plane y = -0.4, 2000 points)
     outnumbers those of the rest of it, behind and before that face (about 270)."""

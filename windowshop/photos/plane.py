@@ -94,34 +94,40 @@ def _hypotheses(near: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray,
     return normals, np.sum(normals * a[keep], axis=1)
 
 
-def _best(near: np.ndarray, centres: np.ndarray, tol: float, rng: np.random.Generator
-          ) -> tuple[np.ndarray, np.ndarray] | None:
+def _best(near: np.ndarray, centres: np.ndarray, tol: float, rng: np.random.Generator,
+          up: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """(normal (3,) toward the cameras, inliers (P,) bool) of the best hypothesis: most points
-    on it, BELOW_WEIGHT less for each point seen beneath it, and CAMERA_SIDE of the cameras above
-    it; None if no hypothesis has the cameras on one side."""
+    on it, BELOW_WEIGHT less for each point seen beneath it, CAMERA_SIDE of the cameras above
+    it, and its normal within `up`'s angle (degrees) of its direction (3,) when given; None if
+    no hypothesis qualifies."""
     normals, offsets = _hypotheses(near, rng)
     flip = np.where(np.median(centres @ normals.T - offsets, axis=0) < 0, -1.0, 1.0)
     normals, offsets = normals * flip[:, None], offsets * flip
     heights = near @ normals.T - offsets  # (P, T)
     score = (np.abs(heights) <= tol).sum(0) - BELOW_WEIGHT * (heights < -ABOVE * tol).sum(0)
-    score = np.where(np.mean(centres @ normals.T - offsets > tol, axis=0) >= CAMERA_SIDE, score,
-                     -np.inf)
+    allowed = np.mean(centres @ normals.T - offsets > tol, axis=0) >= CAMERA_SIDE
+    if up is not None:
+        allowed &= normals @ up[0] >= np.cos(np.radians(up[1]))
+    score = np.where(allowed, score, -np.inf)
     best = int(np.argmax(score))
     if not np.isfinite(score[best]):
         return None
     return normals[best], np.abs(heights[:, best]) <= tol
 
 
-def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0) -> Plane | None:
+def fit_support_plane(points: np.ndarray, cameras: list[Camera], seed: int = 0,
+                      up: tuple[np.ndarray, float] | None = None) -> Plane | None:
     """The plane (RANSAC, then least squares on its inliers) the object stands on, among the
-    points (P, 3) near the cameras' look-at point; None when no plane qualifies."""
+    points (P, 3) near the cameras' look-at point, its normal within `up`'s angle (degrees) of
+    its direction when given; None when no plane qualifies."""
     target, distance = capture_scale(cameras)
     near = points[np.linalg.norm(points - target, axis=-1) <= NEAR_TARGET * distance]
     if len(near) < MIN_INLIERS:
         return None
     near = near[np.random.default_rng(seed).permutation(len(near))[:MAX_POINTS]]
     tol = TOLERANCE * distance
-    best = _best(near, np.stack([c.center for c in cameras]), tol, np.random.default_rng(seed))
+    best = _best(near, np.stack([c.center for c in cameras]), tol, np.random.default_rng(seed),
+                 up)
     if best is None or best[1].sum() < max(MIN_INLIERS, MIN_SHARE * len(near)):
         return None
     normal, inliers = best
@@ -167,7 +173,11 @@ def isolate(points: np.ndarray, cameras: list[Camera], seed: int = 0,
                         f"empty table); {ADVICE}")
     if plane is not None and (_across_upright_photos(plane, cameras) if gravity is None
                               else plane.normal @ gravity < np.cos(np.radians(GRAVITY_DEG))):
-        plane = None  # photos or gravity that agree on up show a wall or a side, not a support
+        # photos or gravity that agree on up show a wall or a side, not a support (a can on a
+        # floor, the tiled wall behind it richer in points): the support is sought again among
+        # the planes they allow (beer_can's frames 0007-0011: its floor, 3 deg off the truth)
+        plane = fit_support_plane(points, cameras, seed, (gravity, GRAVITY_DEG)
+                                  if gravity is not None else (_photos_up(cameras), WALL_ANGLE))
     if plane is not None:
         chosen = _most_seen(points, cameras, plane.height(points) > ABOVE * plane.tolerance)
         if by_points and len(chosen) < MIN_OBJECT_POINTS:  # nothing on it: a wall behind
@@ -211,13 +221,19 @@ def _cameras_up(c2ws: np.ndarray) -> tuple[np.ndarray, str]:
 
 
 def _across_upright_photos(found: Plane, cameras: list[Camera]) -> bool:
-    """Whether the photos agree on an up (their rolls within about 25 degrees of each other, as
-    upright photos) that is more than WALL_ANGLE degrees off the plane's normal. Photos at
-    random rolls agree on nothing, and then the plane alone decides."""
+    """Whether the photos agree on an up (_photos_up) that is more than WALL_ANGLE degrees off
+    the plane's normal. Photos at random rolls agree on nothing, and then the plane alone
+    decides."""
+    up = _photos_up(cameras)
+    return up is not None and _stands_upright(found, up)
+
+
+def _photos_up(cameras: list[Camera]) -> np.ndarray | None:
+    """The unit mean of the photos' up axes (3,) when they agree (their rolls within about 25
+    degrees of each other, as upright photos), else None."""
     mean_up = np.stack([c.c2w[:3, 1] for c in cameras]).mean(0)
-    if np.linalg.norm(mean_up) < UPRIGHT_AGREE:
-        return False
-    return _stands_upright(found, mean_up / np.linalg.norm(mean_up))
+    length = float(np.linalg.norm(mean_up))
+    return mean_up / length if length >= UPRIGHT_AGREE else None
 
 
 def _stands_upright(found: Plane, up: np.ndarray) -> bool:

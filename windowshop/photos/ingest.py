@@ -40,6 +40,8 @@ DARK = 0.35
 # a photo counts as a cut-out when at least this share of it is transparent (alpha under half):
 # an opaque PNG (a screenshot's alpha all 255) or a few clear corner pixels is not one
 CUTOUT_SHARE = 0.01
+DRAFT_MARGIN = 2.0  # a JPEG is decoded at no less than this times its working size
+
 # what a cut-out is laid on: its outline's corners are features too, and grey leaves a light
 # object's outline as clear as a dark one's (dtu_skull's 12 photos cut out by their hand-made
 # masks: 12 placed on black or grey, 11 on white; bench/RESULTS.md, stop 58)
@@ -137,9 +139,12 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
         with Image.open(path) as image:
             stored = image.size
             scale = 1.0 if max_side is None else min(1.0, max_side / max(stored))
-            # a JPEG decodes straight to 1/2, 1/4 or 1/8 of its size, no smaller than asked:
-            # a 12-megapixel photo in 0.015 s instead of 0.25 (bench/RESULTS.md, stop 58)
-            image.draft(image.mode, tuple(math.ceil(side * scale) for side in stored))
+            # a JPEG decodes straight to 1/2, 1/4 or 1/8 of its size, no smaller than asked;
+            # asked for twice the working size, so that the last shrink is still the filter's
+            # and a photo up to twice it decodes as before (beer_can's 1280 px frames: a direct
+            # 1/2 decode moved their pixels enough to change a knife-edge model; stop 58)
+            image.draft(image.mode, tuple(math.ceil(side * min(1.0, DRAFT_MARGIN * scale))
+                                          for side in stored))
             image.load()
             upright = ImageOps.exif_transpose(image)
             full = stored if upright.size == image.size else stored[::-1]  # turned a quarter

@@ -121,10 +121,12 @@ def test_a_wall_behind_the_object_is_no_support_for_upright_photos():
     assert isolated.plane is None and isolated.up[2] > 0.95
 
 
-def test_the_floor_is_found_under_an_object_before_a_wall_richer_in_points():
+@pytest.mark.parametrize("floor_roll, found", [(0.0, True), (20.0, False)])
+def test_the_floor_is_found_under_an_object_before_a_wall_richer_in_points(floor_roll, found):
     """A can on a tiled floor against a tiled wall, photographed upright from in front: the
     wall holds more points than the floor, so it is the likeliest plane; the photos rule it out,
-    and the floor, the likeliest of the planes they allow, is the support."""
+    and the floor, the likeliest of the planes they allow, is the support. A "floor" that would
+    leave the upright photos rolled by 20 degrees is no support either."""
     rng = np.random.default_rng(7)
     blob = rng.normal(size=(300, 3))
     blob = 0.4 * blob / np.linalg.norm(blob, axis=1, keepdims=True) + [0.0, 0.0, 0.45]
@@ -132,6 +134,7 @@ def test_the_floor_is_found_under_an_object_before_a_wall_richer_in_points():
     disk = rng.uniform([-2, -2], [2, 1], size=(600, 2))
     disk = disk[np.linalg.norm(disk, axis=1) > 0.45]
     floor = np.column_stack([disk, rng.normal(0, 0.005, len(disk))])
+    floor = floor @ _rotation(np.array([0.0, 1.0, 0.0]), floor_roll).T  # about the view axis
     cameras = [_rolled(4 * np.array([np.sin(a), -np.cos(a), 0.6]), np.array([0, 0, 0.45]),
                        np.array([0.0, 0.0, 1.0]), rng.uniform(-10, 10))
                for a in np.linspace(-0.8, 0.8, 9)]
@@ -139,6 +142,9 @@ def test_the_floor_is_found_under_an_object_before_a_wall_richer_in_points():
     wall_first = plane.fit_support_plane(points, cameras)
     assert wall_first is not None and abs(wall_first.normal[1]) > 0.99  # the wall wins alone
     isolated = plane.isolate(points, cameras)
+    if not found:
+        assert isolated.plane is None and isolated.up_source == "photos"
+        return
     assert isolated.plane is not None and isolated.up_source == "plane"
     assert np.degrees(np.arccos(min(1.0, isolated.up[2]))) < 2.0
     assert (isolated.index < len(blob)).sum() > 0.5 * len(blob)

@@ -47,6 +47,7 @@ DRAFT_MARGIN = 2.0  # a JPEG is decoded at no less than this times its working s
 # masks: 12 placed on black or grey, 11 on white; bench/RESULTS.md, stop 58)
 BACKDROP = (128, 128, 128)
 
+
 @dataclass
 class Photo:
     """One usable photo (or video frame) at working resolution."""

@@ -45,8 +45,9 @@ def summary_lines(report: dict) -> list[str]:
     if report["unplaced"] or ring:
         lines += [f"    {name}: {advice}" for name, advice in report.get("reshoot", {}).items()]
     if report["masks"] != "none":
-        how = {"given": "the photos' own transparency", "colour": "the plain background", "segmented": "colour, seeded by the object's "
-               "points above the surface it stands on", "rembg": "rembg's matting"}
+        how = {"given": "the photos' own transparency", "colour": "the plain background",
+               "segmented": "colour, seeded by the object's points above the surface it stands on",
+               "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
     if report.get("priors", {}).get("capture"):
         lines.append(f"  {report['priors']['summary']}")

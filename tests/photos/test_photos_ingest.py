@@ -83,6 +83,20 @@ def test_a_cut_out_is_laid_on_grey_and_keeps_its_outline(tmp_path):
     np.testing.assert_array_equal(opaque.pixels, pixels)
 
 
+@pytest.mark.parametrize("suffix", [".png", ".tif"])
+def test_a_sixteen_bit_grey_photo_keeps_its_tones(tmp_path, suffix):
+    # a raw converter's export: Pillow opens it as I;16, and its own convert to RGB clips every
+    # value over 255, a photo turned white
+    with Image.open(KERMIT / "kermit000.jpg") as image:
+        grey = np.asarray(image.convert("L"))
+    Image.fromarray(grey.astype(np.uint16) * 257).save(tmp_path / f"k{suffix}")
+    with Image.open(tmp_path / f"k{suffix}") as stored:
+        assert stored.mode.startswith("I")
+    photo = ingest.read_photo(tmp_path / f"k{suffix}", max_side=None)
+    assert photo.pixels.dtype == np.uint8 and photo.pixels.shape == grey.shape + (3,)
+    assert np.abs(photo.pixels.astype(int) - grey[..., None]).max() <= 1
+
+
 @pytest.mark.skipif(not media.HEIF, reason="pillow-heif is not installed")
 def test_heic_photo_is_read(tmp_path):
     Image.open(KERMIT / "kermit000.jpg").save(tmp_path / "k.heic", quality=90)

@@ -22,7 +22,7 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 from windowshop.errors import UserError
 from windowshop.media import HEIF, HEIF_SUFFIXES, IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_hidden, unzip
 from windowshop.photos.sensors import CAPTURE_FILE, find_capture
-from windowshop.scene.images import parallel_map
+from windowshop.scene.images import eight_bit, parallel_map
 
 MIN_PHOTOS = 5  # below this the verifier's checks cannot tell a right model from a wrong one
 BLUR_RATIO = 0.3  # a photo this many times less sharp than the set's median counts as blurred
@@ -150,7 +150,7 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
             upright = ImageOps.exif_transpose(image)
             full = stored if upright.size == image.size else stored[::-1]  # turned a quarter
             key = _camera_key(image, full)
-            rgb, alpha = _laid_on_backdrop(upright)
+            rgb, alpha = _laid_on_backdrop(eight_bit(upright))
     except UnidentifiedImageError as err:
         raise UserError(f"{path}: not an image (its contents are not a photo format we read); "
                         f"remove it from the input") from err

@@ -48,10 +48,24 @@ def image_size(path: Path) -> tuple[int, int]:
         raise UserError(f"{path}: cannot read the image ({err}); replace or remove it") from err
 
 
+def sixteen_bit_grey(image: Image.Image) -> bool:
+    """Whether Pillow holds the image as 16-bit grey (I;16, or I as some files give it): its
+    `convert` to 8 bits would clip every value over 255, a photo turned white."""
+    return image.mode in ("I;16", "I;16B", "I;16L", "I")
+
+
+def eight_bit(image: Image.Image) -> Image.Image:
+    """The image, a 16-bit grey one scaled to 8-bit grey ("L"); any other as it is."""
+    if not sixteen_bit_grey(image):
+        return image
+    grey = np.asarray(image, dtype=np.float32) * np.float32(255.0 / 65535.0)
+    return Image.fromarray(np.clip(np.rint(grey), 0, 255).astype(np.uint8), "L")
+
+
 def _to_float(image: Image.Image) -> np.ndarray:
     """Pillow image -> float32 (H, W, 3) or (H, W, 4) with straight (not premultiplied) alpha."""
     has_alpha = image.mode in ("RGBA", "LA", "PA") or "transparency" in image.info
-    if image.mode in ("I;16", "I;16B", "I"):  # 16-bit greyscale
+    if sixteen_bit_grey(image):
         grey = np.asarray(image, dtype=np.float32) / 65535.0
         return np.repeat(grey[..., None], 3, axis=-1)
     mode = "RGBA" if has_alpha else "RGB"

@@ -31,6 +31,7 @@ from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
                                orient, segment, sensors)
+from windowshop.photos.exposure import evened, negligible, photo_exposures
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gather_inputs,
                                      read_photos, underexposed)
@@ -327,14 +328,17 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
 
 
 def _write(out_dir: Path, image_dir: Path, pixels: dict[str, np.ndarray], sfm: SfmResult,
-           found: Located, source: Path, advance) -> Path:
-    """Images, masks, transforms.json, the COLMAP model and the camera picture; `pixels` by
-    image file name."""
+           found: Located, source: Path, exposures: dict[str, np.ndarray], advance) -> Path:
+    """Images (each divided by its entry in `exposures`, by image file name), masks,
+    transforms.json, the COLMAP model and the camera picture; `pixels` by image file name."""
     (out_dir / "images").mkdir(parents=True, exist_ok=True)
     if found.masks:
         (out_dir / "masks").mkdir(exist_ok=True)
     for p in found.photos:
-        if p.image_name in sfm.turned:  # the photo as taken, not as structure from motion saw it
+        exposure = exposures.get(p.image_name)
+        if exposure is not None:
+            output.write_image(out_dir, p.name, evened(pixels[p.image_name], exposure))
+        elif p.image_name in sfm.turned:  # the photo as taken, not as structure from motion saw it
             output.write_image(out_dir, p.name, pixels[p.image_name])
         else:
             shutil.copyfile(image_dir / p.image_name, out_dir / "images" / f"{p.name}.jpg")
@@ -349,6 +353,13 @@ def _write(out_dir: Path, image_dir: Path, pixels: dict[str, np.ndarray], sfm: S
                         found.points)
     return output.write_transforms_json(out_dir, found.photos, found.transform, found.aabb,
                                         near_far, found.background, bool(found.masks), str(source))
+
+
+def _exposures(sfm: SfmResult, image_dir: Path) -> dict[str, np.ndarray]:
+    """The exposure of each placed photo that differs from the others' more than negligibly, by
+    image file name (windowshop.photos.exposure)."""
+    found = photo_exposures(sfm.reconstruction, image_dir)
+    return {name: e for name, e in found.items() if not negligible(e)}
 
 
 def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
@@ -456,9 +467,12 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
         choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos),
                          _cutouts(photos), options, shown)
     sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
+    exposures = _exposures(sfm, image_dir) if options.even_exposure else {}
     with stages.stage("writing the scene", len(found.photos)) as advance:
-        transforms = _write(out_dir, image_dir, pixels, sfm, found, source, advance)
+        transforms = _write(out_dir, image_dir, pixels, sfm, found, source, exposures, advance)
     summary = _report(source, inputs, photos, dropped, dark, sfm, found, stages)
+    summary["exposures"] = {name.rsplit(".", 1)[0]: [round(float(v), 3) for v in e]
+                            for name, e in exposures.items()}
     summary["verification"] = _verification(choice, options.force)
     summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
                                          found.plane is not None,

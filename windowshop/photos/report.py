@@ -37,6 +37,10 @@ def summary_lines(report: dict) -> list[str]:
                      f"{report['used']} photos")
     if report.get("dark"):
         lines.append(f"  dark (too little light): {len(report['dark'])} of {report['used']} photos")
+    if report.get("exposures"):
+        most = max(abs(v - 1.0) for e in report["exposures"].values() for v in e)
+        lines.append(f"  exposure and white balance evened out: {len(report['exposures'])} of "
+                     f"{report['placed']} photos, by up to {100 * most:.0f}%")
     ring = report.get("estimated_from_ring", {})
     if ring:
         lines.append(f"  estimated from the ring of the others, not measured: {', '.join(ring)}")

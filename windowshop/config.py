@@ -170,8 +170,7 @@ class PrepareOptions:
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (photo px)
     matcher: str = "auto"  # or exhaustive, sequential, retrieval (auto: by count and order)
     masks: bool = True  # foreground masks (by colour on a plain background, else segmented)
-    # take each photo's own exposure and white balance out of its colours (photos/exposure.py)
-    even_exposure: bool = True
+    even_exposure: bool = True  # take each photo's own exposure and white balance out of its colours
     matting: str = "grabcut"  # "grabcut" (built in) or "rembg" (needs rembg and its weights)
     overwrite: bool = False  # replace an earlier prepare's output folder
     seed: int = 0  # random seed of structure from motion

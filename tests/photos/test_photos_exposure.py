@@ -76,8 +76,9 @@ def test_a_capture_whose_colours_change_shot_to_shot_is_evened_out(kermit_in_two
                    & {p.stem for p in (cast / "images").glob("*.jpg")})
     assert len(names) >= 10
     report = json.loads((cast / "report.json").read_text())
-    assert any(line.startswith(f"  exposure and white balance evened out: {len(seen)} of")
-               for line in summary_lines(report))
+    most = max(max(v, 1 / v) for e in seen.values() for v in e)
+    assert f"  exposure and white balance evened out on {len(seen)} of {report['placed']} photos " \
+           f"(the furthest off by a factor of {most:.2f})" in summary_lines(report)
     # the cast found is the one given, on top of the photos' own (up to the median's scale); a
     # photo left out of the report was within 1% of the median
     ratio = np.stack([seen.get(n, np.ones(3)) / (gains[n] * before.get(n, np.ones(3)))

@@ -38,9 +38,9 @@ def summary_lines(report: dict) -> list[str]:
     if report.get("dark"):
         lines.append(f"  dark (too little light): {len(report['dark'])} of {report['used']} photos")
     if report.get("exposures"):
-        most = max(abs(v - 1.0) for e in report["exposures"].values() for v in e)
-        lines.append(f"  exposure and white balance evened out: {len(report['exposures'])} of "
-                     f"{report['placed']} photos, by up to {100 * most:.0f}%")
+        most = max(max(v, 1.0 / v) for e in report["exposures"].values() for v in e)
+        lines.append(f"  exposure and white balance evened out on {len(report['exposures'])} of "
+                     f"{report['placed']} photos (the furthest off by a factor of {most:.2f})")
     ring = report.get("estimated_from_ring", {})
     if ring:
         lines.append(f"  estimated from the ring of the others, not measured: {', '.join(ring)}")

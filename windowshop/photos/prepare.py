@@ -467,8 +467,8 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
         choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos),
                          _cutouts(photos), options, shown)
     sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
-    exposures = _exposures(sfm, image_dir) if options.even_exposure else {}
     with stages.stage("writing the scene", len(found.photos)) as advance:
+        exposures = _exposures(sfm, image_dir) if options.even_exposure else {}
         transforms = _write(out_dir, image_dir, pixels, sfm, found, source, exposures, advance)
     summary = _report(source, inputs, photos, dropped, dark, sfm, found, stages)
     summary["exposures"] = {name.rsplit(".", 1)[0]: [round(float(v), 3) for v in e]

@@ -49,8 +49,10 @@ def test_a_few_photos_folded_once_are_refused(tmp_path):
     with pytest.raises(UserError) as refused:
         prepare(photos, tmp_path / "scene", PrepareOptions(), show=False)
     message = str(refused.value)
-    assert "0000.jpg-0025.jpg" in message, message
-    assert "look alike" in message
+    # refused as a fold by the background check, or with the photos the print on the can's far
+    # side misplaced left out, too few to check (verify.alone's FAR_DEG, stop 59)
+    assert ("0000.jpg-0025.jpg" in message and "look alike" in message
+            or "could only place 4 of 6" in message and "0020.jpg" in message), message
     assert not (tmp_path / "scene" / "transforms.json").exists()
 
 

@@ -12,11 +12,8 @@ divided by its own.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pycolmap
-from PIL import Image
 
 MAX_EXPOSURE = 2.0  # an exposure is taken out up to this factor either way, per channel
 MIN_OBSERVATIONS = 20  # a photo with fewer usable track pixels keeps its colours
@@ -26,15 +23,14 @@ ROUNDS = 12  # alternating passes (point colours, then exposures) per fit
 NEGLIGIBLE_LOG = 0.01  # a photo whose exposures all lie within 1% of 1 is left as it is
 
 
-def track_colours(reconstruction: pycolmap.Reconstruction, image_dir: Path
+def track_colours(reconstruction: pycolmap.Reconstruction, pixels: dict[str, np.ndarray]
                   ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
     """(placed image names, image index and point index of each observation, its log colour
     (N, 3)): every observation of a point seen by two photos or more, its colour the mean of the
-    3 x 3 pixels at the keypoint in `image_dir`'s image (as structure from motion saw it)."""
+    3 x 3 pixels at the keypoint in `pixels` (H, W, 3) uint8 by image name, each photo as
+    structure from motion saw it."""
     names = sorted(im.name for im in reconstruction.images.values() if im.has_pose)
     index = {name: i for i, name in enumerate(names)}
-    pixels = {name: np.asarray(Image.open(image_dir / name).convert("RGB"), np.float32)
-              for name in names}
     images, points, colours = [], [], []
     for point_id, point in enumerate(reconstruction.points3D.values()):
         if point.track.length() < 2:
@@ -48,7 +44,7 @@ def track_colours(reconstruction: pycolmap.Reconstruction, image_dir: Path
             if 1 <= x < photo.shape[1] - 1 and 1 <= y < photo.shape[0] - 1:
                 images.append(index[image.name])
                 points.append(point_id)
-                colours.append(photo[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3).mean(0))
+                colours.append(photo[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3).mean(0, np.float32))
     colours = np.array(colours, np.float32).reshape(-1, 3)
     usable = np.all((colours > CLIPPED[0]) & (colours < CLIPPED[1]), axis=1)
     return (names, np.array(images, int)[usable], np.array(points, int)[usable],
@@ -71,10 +67,11 @@ def _fit(images: np.ndarray, points: np.ndarray, logs: np.ndarray, photos: int
     return exposures, colour
 
 
-def photo_exposures(reconstruction: pycolmap.Reconstruction, image_dir: Path
+def photo_exposures(reconstruction: pycolmap.Reconstruction, pixels: dict[str, np.ndarray]
                     ) -> dict[str, np.ndarray]:
-    """Each placed image's exposure (3,) against the others', by image name (see `solve`)."""
-    names, images, points, logs = track_colours(reconstruction, image_dir)
+    """Each placed image's exposure (3,) against the others', by image name (see `solve`;
+    `pixels` as in `track_colours`)."""
+    names, images, points, logs = track_colours(reconstruction, pixels)
     return dict(zip(names, solve(images, points, logs, len(names))))
 
 

@@ -355,10 +355,11 @@ def _write(out_dir: Path, image_dir: Path, pixels: dict[str, np.ndarray], sfm: S
                                         near_far, found.background, bool(found.masks), str(source))
 
 
-def _exposures(sfm: SfmResult, image_dir: Path) -> dict[str, np.ndarray]:
+def _exposures(sfm: SfmResult, pixels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The exposure of each placed photo that differs from the others' more than negligibly, by
-    image file name (windowshop.photos.exposure)."""
-    found = photo_exposures(sfm.reconstruction, image_dir)
+    image file name (windowshop.photos.exposure); `pixels` are the photos as taken."""
+    seen = {name: orient.for_sfm(p) if name in sfm.turned else p for name, p in pixels.items()}
+    found = photo_exposures(sfm.reconstruction, seen)
     return {name: e for name, e in found.items() if not negligible(e)}
 
 
@@ -468,7 +469,7 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
                          _cutouts(photos), options, shown)
     sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
     with stages.stage("writing the scene", len(found.photos)) as advance:
-        exposures = _exposures(sfm, image_dir) if options.even_exposure else {}
+        exposures = _exposures(sfm, pixels) if options.even_exposure else {}
         transforms = _write(out_dir, image_dir, pixels, sfm, found, source, exposures, advance)
     summary = _report(source, inputs, photos, dropped, dark, sfm, found, stages)
     summary["exposures"] = {name.rsplit(".", 1)[0]: [round(float(v), 3) for v in e]

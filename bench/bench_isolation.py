@@ -1,11 +1,15 @@
 """Object isolation on real backgrounds: `windowshop prepare`'s masks against hand-made ones.
 
-    python bench/bench_isolation.py [--views 16] [--max-side 640] [--only skull|beer|fruit] [--keep DIR]
+    python bench/bench_isolation.py [--views 16] [--max-side 640]
+                                    [--only skull|turntable|beer|fruit] [--keep DIR]
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
-mask (resized to the hand mask's size) with the hand mask. beer_can (a can on a tiled floor, no
-hand masks; the frames of bench_prepare.py) and fruit (an apple and a banana on a white cloth):
-the masks' share of the image. Prints JSON; `--keep` leaves the scenes there.
+mask (resized to the hand mask's size) with the hand mask. turntable: the same skull, its
+hand-made mask laid over one still photo of a room, a tiled floor and a paper towel in turn
+(scene.products.on_turntable: a phone that stood still while the object turned), scored alike.
+beer_can (a can on a tiled floor, no hand masks; the frames of bench_prepare.py) and fruit (an
+apple and a banana on a white cloth): the masks' share of the image. Prints JSON; `--keep`
+leaves the scenes there.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from PIL import Image
 
 from windowshop.config import PrepareOptions
 from windowshop.photos.prepare import prepare
+from windowshop.scene import products
 from bench_prepare import beer_photos  # bench/ is on the path when run as a script
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -64,9 +69,8 @@ def summary(report: dict) -> dict:
             "seconds": report["total_seconds"], "stages": report["seconds"]}
 
 
-def skull(work: Path, views: int, options: PrepareOptions) -> dict:
-    files = spread(sorted((DATA / "dtu_skull" / "images").glob("*.jpg")), views)
-    report, masks = run(linked(files, work / "skull"), work / "skull-scene", options)
+def skull_ious(masks: dict[Path, np.ndarray]) -> dict:
+    """mean_iou, worst_iou and each iou of `masks` (by dtu_skull photo) with the hand-made ones."""
     scores = {}
     for photo, mask in masks.items():
         truth = np.asarray(Image.open(DATA / "dtu_skull" / "masks" / f"{photo.stem}.png")
@@ -74,8 +78,33 @@ def skull(work: Path, views: int, options: PrepareOptions) -> dict:
         resized = Image.fromarray(mask).resize(truth.shape[::-1], Image.NEAREST)
         scores[photo.stem] = round(iou(np.asarray(resized), truth), 3)
     values = list(scores.values()) or [0.0]
-    return {**summary(report), "mean_iou": round(float(np.mean(values)), 3),
-            "worst_iou": min(values), "iou": scores}
+    return {"mean_iou": round(float(np.mean(values)), 3), "worst_iou": min(values),
+            "iou": scores}
+
+
+def skull(work: Path, views: int, options: PrepareOptions) -> dict:
+    files = spread(sorted((DATA / "dtu_skull" / "images").glob("*.jpg")), views)
+    report, masks = run(linked(files, work / "skull"), work / "skull-scene", options)
+    return {**summary(report), **skull_ious(masks)}
+
+
+TURNTABLE_BACKDROPS = {"room": DATA / "kermit" / "kermit000.jpg",
+                       "tiles": DATA / "beer_can" / "images" / "0030.jpg",
+                       "towel": DATA / "fruit" / "newfruit_small" / "IMG_3630.jpg"}
+
+
+def turntable(work: Path, views: int, options: PrepareOptions) -> dict:
+    """dtu_skull's skull turned in front of each still backdrop in TURNTABLE_BACKDROPS."""
+    frames = products.dtu_frames(DATA / "dtu_skull")
+    frames = [frames[i] for i in np.linspace(0, len(frames) - 1, min(views, len(frames)))
+              .round().astype(int)]
+    rows = {}
+    for name, backdrop in TURNTABLE_BACKDROPS.items():
+        capture = products.on_turntable(frames, backdrop, work / f"turntable-{name}")
+        report, masks = run(capture / "images", work / f"turntable-{name}-scene", options)
+        rows[name] = {**summary(report), **skull_ious(masks)}
+    return {"mean_iou": round(float(np.mean([r["mean_iou"] for r in rows.values()])), 3),
+            "worst_iou": min(r["worst_iou"] for r in rows.values()), **rows}
 
 
 def area(name: str, files: list[Path], work: Path, options: PrepareOptions) -> dict:
@@ -101,7 +130,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=16)
     parser.add_argument("--max-side", type=int, default=640)
-    parser.add_argument("--only", choices=["skull", "beer", "fruit"], default=None)
+    parser.add_argument("--only", choices=["skull", "turntable", "beer", "fruit"], default=None)
     parser.add_argument("--keep", default=None, help="write the scenes under this folder")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
@@ -109,8 +138,9 @@ def main() -> None:
                "max_side": args.max_side}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(args.keep) if args.keep else Path(tmp)
-        for key, name, bench in (("skull", "dtu_skull", skull), ("beer", "beer_can", beer),
-                                 ("fruit", "fruit", fruit)):
+        for key, name, bench in (("skull", "dtu_skull", skull),
+                                 ("turntable", "turntable", turntable),
+                                 ("beer", "beer_can", beer), ("fruit", "fruit", fruit)):
             if args.only in (None, key):
                 results[name] = bench(work, args.views, options)
     print(json.dumps(results, indent=2))

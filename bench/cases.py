@@ -1,8 +1,8 @@
 """Build the captures with known answers that the shared data lacks, for bench_verify's `--extra`,
 each as a folder with images/ and a ground-truth transforms.json (one JSON line per case).
 
-    python bench/cases.py OUT [--only doppelganger,granite,skull_up,fruit_rolled,fruit_mixed,
-                                      beer_loop] [--seed 0]
+    python bench/cases.py OUT [--only doppelganger,granite,skull_up,skull_turntable,
+                                      fruit_rolled,fruit_mixed,beer_loop] [--seed 0]
     python bench/bench_verify.py --extra doppelganger=OUT/doppelganger --extra granite=OUT/granite \
         --extra skull_up=OUT/skull_up --extra fruit_rolled=OUT/fruit_rolled \
         --extra fruit_mixed=OUT/fruit_mixed
@@ -14,6 +14,9 @@ each as a folder with images/ and a ground-truth transforms.json (one JSON line 
                 nearly every sparse point lies on the table;
   skull_up      every third dtu_skull photo (17) pitched up 5 degrees (products.turned): a
                 capture looking up, with no support plane in view of most photos;
+  skull_turntable  every other dtu_skull photo (25), the skull (its hand-made mask) over one
+                photo of a room (kermit000): the photos of a phone that stood still while the
+                object turned in front of it (products.on_turntable);
   fruit_rolled  every fruit photo (81) rolled by quarters in turn, 0/90/180/270 degrees (the
                 phone held every way), with each frame's gravity: the up vector's case;
   fruit_mixed   every fruit photo (81), every other one given in landscape: the whole frame
@@ -25,7 +28,8 @@ each as a folder with images/ and a ground-truth transforms.json (one JSON line 
                 of a can printed alike on two sides, over a tiled floor (`--arcs 6:150 8:200`).
 The same on every run; `--seed K` (K > 0) gives other captures of the same kind (beer_loop
 alike whatever K), to check that an outcome is not one seed's: the rendered cases' cameras,
-jitter and prints drawn from K, skull_up every third photo from photo K mod 3, fruit_rolled
+jitter and prints drawn from K, skull_up every third photo from photo K mod 3, skull_turntable
+every other photo from photo K mod 2 over kermit's photo K mod 11, fruit_rolled
 each photo's quarter drawn at random, fruit_mixed each photo's shape.
 The turned cases read ../shared/data in place.
 """
@@ -51,6 +55,11 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 def skull_up(out: Path, seed: int) -> Path:
     frames = products.dtu_frames(DATA / "dtu_skull")[seed % 3::3]
     return products.turned(frames, out, 0.0, 5.0)
+
+
+def skull_turntable(out: Path, seed: int) -> Path:
+    frames = products.dtu_frames(DATA / "dtu_skull")[seed % 2::2]
+    return products.on_turntable(frames, DATA / "kermit" / f"kermit{seed % 11:03d}.jpg", out)
 
 
 def fruit_rolled(out: Path, seed: int) -> Path:
@@ -108,6 +117,7 @@ BUILDERS = {
     "doppelganger": lambda out, seed: products.doppelganger_box(out, 40, (640, 480), seed),
     "granite": lambda out, seed: products.figure_on_granite(out, 20, (640, 480), seed),
     "skull_up": skull_up,
+    "skull_turntable": skull_turntable,
     "fruit_rolled": fruit_rolled,
     "fruit_mixed": fruit_mixed,
     "beer_loop": beer_loop,

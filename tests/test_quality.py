@@ -44,6 +44,15 @@ def test_advice_names_the_photos_and_the_side_to_reshoot():
                    "held_out_psnr": 28.0}) == []  # a good capture gets no advice
 
 
+def test_a_still_phone_is_told_to_turn_the_object_not_to_walk():
+    tips = advice({"unplaced": ["IMG_7.jpg"], "empty_arcs": [(120.0, 200.0)], "placed": 30,
+                   "elevations": [10, 35], "masks": "still", "held_out_psnr": 28.0})
+    assert tips == ["photo IMG_7.jpg could not be placed: retake so each photo shares most of its "
+                    "view with the photo before it (turn the object in smaller steps)",
+                    "no photos between 120° and 200° around the object: turn that side of it "
+                    "to the phone"]
+
+
 def test_report_of_a_one_sided_capture(tmp_path):
     cams = ring(np.linspace(0, 140, 8))
     views = [View(c, np.zeros((64, 64, 3), np.float32), "train", f"v{i}") for i, c in enumerate(cams)]

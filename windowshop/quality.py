@@ -46,9 +46,11 @@ def empty_arcs(azimuths: np.ndarray, min_gap: float = GAP_DEGREES) -> list[tuple
 def advice(report: dict) -> list[str]:
     """Concrete things to do better, from a quality report's facts (most important first)."""
     tips = []
+    turned = report.get("masks") == "still"  # the phone stood still, the object turned
     if report.get("unplaced"):
         tips.append(f"{_names(report['unplaced'])} could not be placed: retake so each photo shares "
-                    "most of its view with the photo before it")
+                    "most of its view with the photo before it"
+                    + (" (turn the object in smaller steps)" if turned else ""))
     blurred = [name for name, why in report.get("dropped", {}).items() if "blur" in why]
     if blurred:
         tips.append(f"{_names(blurred)} {'is' if len(blurred) == 1 else 'are'} blurred: hold the "
@@ -64,8 +66,8 @@ def advice(report: dict) -> list[str]:
                     "and the cameras are placed less precisely: save them at the photos' full "
                     "size, or give the photos themselves")
     for start, end in report.get("empty_arcs", []):
-        tips.append(f"no photos between {start:.0f}° and {end:.0f}° around the object: walk that "
-                    "side again")
+        tips.append(f"no photos between {start:.0f}° and {end:.0f}° around the object: "
+                    + ("turn that side of it to the phone" if turned else "walk that side again"))
     if report.get("placed", FEW_PHOTOS) < FEW_PHOTOS:
         tips.append(f"only {report['placed']} photos were placed: 20-40 all round give a sharper model")
     elevations = report.get("elevations")

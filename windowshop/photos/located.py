@@ -20,7 +20,8 @@ class Located:
     aabb: np.ndarray  # (2, 3) normalised
     points: np.ndarray  # (Q, 3) the object's sparse points, normalised
     masks: dict[str, np.ndarray]  # photo name -> (H, W) bool; empty when none are made
-    mask_kind: str  # "given" (the photos' cut-outs), "segmented" (GrabCut), "colour"
+    mask_kind: str  # "given" (the photos' cut-outs), "segmented" (GrabCut), "still" (GrabCut
+    # with a still backdrop, windowshop.photos.still), "colour"
     # (plain background), "rembg" or "none"
     background: str
     plane: Plane | None  # the support plane, COLMAP frame

@@ -30,7 +30,7 @@ from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
 from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
-                               orient, segment, sensors)
+                               orient, segment, sensors, still)
 from windowshop.photos.exposure import evened, negligible, photo_exposures
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gather_inputs,
@@ -225,9 +225,10 @@ def _looked_at(views: list[segment.View]) -> list[segment.View]:
 def find_masks(views: list[segment.View], search: np.ndarray, matting: str,
                given: list[np.ndarray] | None = None
                ) -> tuple[dict[str, np.ndarray], str, np.ndarray | None, dict[str, np.ndarray]]:
-    """(photo name -> (H, W) bool mask, how they were made: "given", "rembg", "colour" or
-    "segmented", the object's box (2, 3) from the masks' visual hull, or None, the masks before
-    that hull cut them) for an object in `search`.
+    """(photo name -> (H, W) bool mask, how they were made: "given", "rembg", "colour",
+    "segmented" or "still" (segmented with the views' still backdrop), the object's box (2, 3)
+    from the masks' visual hull, or None, the masks before that hull cut them) for an object in
+    `search`.
 
     The photos' own cut-outs (`given`, one per view) when they are; else a learned matting
     backend when asked for; else colour on a plain background; else GrabCut seeded by the
@@ -247,7 +248,8 @@ def find_masks(views: list[segment.View], search: np.ndarray, matting: str,
                                     [v.camera for v in views], search)
         kind = "colour"
     else:
-        masks, kind = segment.segment(views, search), "segmented"
+        still_backdrop = any(v.backdrop is not None for v in views)
+        masks, kind = segment.segment(views, search), "still" if still_backdrop else "segmented"
     final, box = segment.consistent(masks, [v.camera for v in views], search)
     return ({v.name: m for v, m in zip(views, final)}, kind, box,
             {v.name: m for v, m in zip(views, masks)})
@@ -312,6 +314,10 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
         views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
         if not by_points:  # no points of its own: it is surely where every photo looks
             views = _looked_at(views)
+        if sfm.database is not None and still.fixed_camera(sfm.database):
+            shown = still.backdrop([v.pixels for v in views])
+            views = views if shown is None else [replace(v, backdrop=b)
+                                                 for v, b in zip(views, shown)]
         given = None if cutouts is None else [cutouts[p.image_name] for p in posed]
         found, kind, box, raw = find_masks(views, search, options.matting, given)
         if box is None and not by_points:

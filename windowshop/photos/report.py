@@ -51,6 +51,8 @@ def summary_lines(report: dict) -> list[str]:
     if report["masks"] != "none":
         how = {"given": "the photos' own transparency", "colour": "the plain background",
                "segmented": "colour, seeded by the object's points above the surface it stands on",
+               "still": "colour, seeded by the object's points and by the backdrop that stays "
+                        "put behind it (the phone stood still while the object turned)",
                "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
     if report.get("priors", {}).get("capture"):

@@ -615,3 +615,30 @@ def turned(photos: str | Path | list[SourceFrame], out: str | Path,
         lenses.append(f.distortion)
     names = [Path(f.image_path).stem for f in frames]
     return write_capture(out, cams, images, masks if has_masks else None, names, lenses, extras)
+
+
+def on_turntable(photos: str | Path | list[SourceFrame], backdrop: str | Path, out: str | Path,
+                 feather_px: float = 1.0) -> Path:
+    """Copies of masked posed photos as a phone that stood still would take them while the object
+    turned in front of it (a turntable): each photo's object (its mask, edges feathered by
+    `feather_px`) over the one photo `backdrop`, resized to the photo. The object's cameras stay
+    its cameras (the object turns, not the phone), with masks, and each frame's "gravity" from
+    the world's up (`up_vector(c2ws, "level")`), as `turned` writes them."""
+    frames = _frames(photos)
+    up = up_vector(np.stack([f.camera.c2w for f in frames]), "level")
+    with Image.open(backdrop) as image:
+        room = image.convert("RGB")
+    images, masks = [], []
+    for f in frames:
+        cam = f.camera
+        size = (cam.width, cam.height)
+        pixels = np.asarray(Image.open(f.image_path).convert("RGB").resize(size), np.float32)
+        mask = np.asarray(Image.open(f.mask_path).convert("L").resize(size)) > 127
+        alpha = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), feather_px)[..., None]
+        behind = np.asarray(room.resize(size, Image.LANCZOS), np.float32)
+        images.append(np.clip(pixels * alpha + behind * (1 - alpha) + 0.5, 0, 255).astype(np.uint8))
+        masks.append(mask)
+    cameras = [f.camera for f in frames]
+    return write_capture(out, cameras, images, masks, [Path(f.image_path).stem for f in frames],
+                         [f.distortion for f in frames],
+                         [{"gravity": (c.c2w[:3, :3].T @ -up).tolist()} for c in cameras])

@@ -75,7 +75,8 @@ def backdrop(images: list[np.ndarray]) -> list[np.ndarray] | None:
     for _ in range(2):  # the median, then each photo's exposure against it, then again
         median = np.median(small, axis=0)
         grey = small.mean(-1) / np.maximum(median.mean(-1), 1e-3)
-        small = small / np.median(grey.reshape(len(small), -1), axis=1)[:, None, None, None]
+        exposure = np.median(grey.reshape(len(small), -1), axis=1)
+        small = small / np.maximum(exposure, 1e-3)[:, None, None, None]  # a black photo stays
     median = np.median(small, axis=0)
     still = np.abs(small - median).max(-1) < TOLERANCE
     # only where the median has texture: a turning object moves its texture, while a plain

@@ -24,12 +24,13 @@ needs_data = pytest.mark.skipif(not (SKULL / "cameras_sphere.npz").is_file() or 
                                 reason="needs dtu_skull and kermit")
 
 
-def _turning_over_texture(count: int, rng: np.random.Generator):
+def _turning_over_texture(count: int, rng: np.random.Generator, nudge: int = 0):
     """`count` photos (120, 160, 3) uint8 of a textured object turning in front of one textured
     backdrop (an ellipse whose width and face change from photo to photo, with a plain grey hub
     that stays put, as a round part of an object does), each photo at its own exposure
-    (0.8-1.2), and the object's (120, 160) bool per photo."""
-    backdrop = rng.uniform(40, 200, (120, 160, 3))
+    (0.8-1.2), the backdrop shifted by up to `nudge` px either way (a nudged phone), and the
+    object's (120, 160) bool per photo."""
+    backdrop = rng.uniform(40, 200, (120 + 2 * nudge, 160 + 2 * nudge, 3))
     face = rng.uniform(40, 200, (120, 160, 3))
     rows, cols = np.mgrid[:120, :160]
     photos, objects = [], []
@@ -38,18 +39,24 @@ def _turning_over_texture(count: int, rng: np.random.Generator):
         inside = ((cols - 80) / width) ** 2 + ((rows - 60) / 40) ** 2 < 1
         turned = np.roll(face, 7 * k, axis=1)  # the object turns: another face each photo
         turned[np.hypot(rows - 60, cols - 80) < 12] = 120.0
-        pixels = np.where(inside[..., None], turned, backdrop) * rng.uniform(0.8, 1.2)
+        dx, dy = rng.integers(0, 2 * nudge + 1, 2)
+        behind = backdrop[dy:dy + 120, dx:dx + 160]
+        pixels = np.where(inside[..., None], turned, behind) * rng.uniform(0.8, 1.2)
         photos.append(np.clip(pixels, 0, 255).astype(np.uint8))
         objects.append(inside)
     return photos, objects
 
 
-def test_the_backdrop_is_what_stays_put_whatever_each_photos_exposure():
-    photos, objects = _turning_over_texture(8, np.random.default_rng(0))
+@pytest.mark.parametrize("nudge", [0, 3])
+def test_the_backdrop_is_what_stays_put_whatever_each_photos_exposure(nudge):
+    photos, objects = _turning_over_texture(8, np.random.default_rng(0), nudge)
     shown = still.backdrop(photos)
     assert shown is not None and len(shown) == len(photos)
-    # where most photos show the backdrop, the median is the backdrop's
-    mostly_behind = np.mean(objects, axis=0) < 0.5
+    # where most photos show the backdrop, the median is the backdrop's (but at the edges a
+    # nudged photo shows what the others do not)
+    margin = np.zeros((120, 160), bool)
+    margin[2 * nudge:120 - 2 * nudge, 2 * nudge:160 - 2 * nudge] = True
+    mostly_behind = (np.mean(objects, axis=0) < 0.5) & margin
     for backdrop, inside in zip(shown, objects):
         assert backdrop.shape == inside.shape
         assert backdrop[~inside & mostly_behind].mean() >= 0.95  # however bright the photo
@@ -83,13 +90,16 @@ def test_a_still_phone_is_told_from_a_walk_round_by_its_raw_matches(tmp_path):
 
 
 @needs_data
-def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path):
-    """dtu_skull's skull over one photo of a room, 12 photos: the room stays put behind a skull
+@pytest.mark.parametrize("nudge", [0, 3])
+def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path, nudge):
+    """dtu_skull's skull over one photo of a room, 13 photos: the room stays put behind a skull
     that turns. Without the still backdrop, GrabCut took the room's parts beside the skull for
     it: masks IoU 0.82 against the hand-made ones on average, 0.71 at worst (0.95 and 0.84
-    with it)."""
+    with it). With the room shifted by up to 3 px in each photo (a propped phone nudged by the
+    tap on its shutter), COLMAP's stationary filter (4 px) kept the room's matches and only 2
+    photos were placed; verified again past the nudge, 0.93 and 0.82."""
     frames = products.dtu_frames(SKULL)[::4]
-    products.on_turntable(frames, ROOM, tmp_path / "capture")
+    products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=nudge)
     result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
                      show=False)
     assert result.report["masks"] == "still"
@@ -102,5 +112,5 @@ def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path):
         hand = np.asarray(Image.open(truth[stems[mask.stem]]).convert("L")
                           .resize(ours.shape[::-1])) > 127
         ious.append((ours & hand).sum() / (ours | hand).sum())
-    assert len(ious) >= 10
+    assert len(ious) >= len(frames) - 2
     assert np.mean(ious) >= 0.9 and min(ious) >= 0.75, ious

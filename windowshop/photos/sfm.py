@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from windowshop.photos import fill, orient, pairs
+from windowshop.photos import fill, orient, pairs, still
 from windowshop.photos.progress import Stages
 
 MIN_KEYPOINTS = 80  # fewer SIFT features than this in a photo: too little texture to place it
@@ -235,6 +235,15 @@ def match(database: Path, work: Path, name_pairs: list[tuple[str, str]], setting
             pairing_options=pycolmap.ImportedPairingOptions(match_list_path=listing),
             device=pycolmap.Device.cpu)
         advance(len(chunk))
+    if still.fixed_camera(database) and not still.fixed_camera(database, still.STILL_PX):
+        # the object turned in front of a phone nudged when its shutter was tapped: its
+        # backdrop's matches moved a few pixels, past COLMAP's stationary 4, and would hold every
+        # photo at one spot (a phone on a tripod keeps COLMAP's 4: 12 drops the object's
+        # matches that move little too)
+        verification.stationary_matches_max_error = still.STATIONARY_PX
+        with pycolmap.Database.open(database) as db:
+            db.clear_two_view_geometries()
+        pycolmap.geometric_verification(database, two_view_geometry_options=verification)
 
 
 def mapping_options(settings: SfmSettings, relaxed: bool, lowest: bool = False

@@ -618,14 +618,17 @@ def turned(photos: str | Path | list[SourceFrame], out: str | Path,
 
 
 def on_turntable(photos: str | Path | list[SourceFrame], backdrop: str | Path, out: str | Path,
-                 feather_px: float = 1.0) -> Path:
+                 feather_px: float = 1.0, nudge_px: int = 0, seed: int = 0) -> Path:
     """Copies of masked posed photos as a phone that stood still would take them while the object
     turned in front of it (a turntable): each photo's object (its mask, edges feathered by
-    `feather_px`) over the one photo `backdrop`, resized to the photo. The object's cameras stay
-    its cameras (the object turns, not the phone), with masks, and each frame's "gravity" from
-    the world's up (`up_vector(c2ws, "level")`), as `turned` writes them."""
+    `feather_px`) over the one photo `backdrop`, resized to the photo and shifted by up to
+    `nudge_px` whole pixels either way, drawn from `seed` (a propped phone nudged when its shutter
+    is tapped). The object's cameras stay its cameras (the object turns, not the phone), with
+    masks, and each frame's "gravity" from the world's up (`up_vector(c2ws, "level")`), as
+    `turned` writes them."""
     frames = _frames(photos)
     up = up_vector(np.stack([f.camera.c2w for f in frames]), "level")
+    rng = np.random.default_rng(seed)
     with Image.open(backdrop) as image:
         room = image.convert("RGB")
     images, masks = [], []
@@ -635,7 +638,10 @@ def on_turntable(photos: str | Path | list[SourceFrame], backdrop: str | Path, o
         pixels = np.asarray(Image.open(f.image_path).convert("RGB").resize(size), np.float32)
         mask = np.asarray(Image.open(f.mask_path).convert("L").resize(size)) > 127
         alpha = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), feather_px)[..., None]
-        behind = np.asarray(room.resize(size, Image.LANCZOS), np.float32)
+        larger = (size[0] + 2 * nudge_px, size[1] + 2 * nudge_px)
+        dx, dy = rng.integers(0, 2 * nudge_px + 1, 2)
+        behind = np.asarray(room.resize(larger, Image.LANCZOS), np.float32)[
+            dy:dy + size[1], dx:dx + size[0]]
         images.append(np.clip(pixels * alpha + behind * (1 - alpha) + 0.5, 0, 255).astype(np.uint8))
         masks.append(mask)
     cameras = [f.camera for f in frames]

@@ -315,7 +315,9 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
         if not by_points:  # no points of its own: it is surely where every photo looks
             views = _looked_at(views)
         if sfm.database is not None and still.fixed_camera(sfm.database):
-            shown = still.backdrop([v.pixels for v in views])
+            moved = None if sfm.turned else still.shifts(sfm.database,
+                                                         [p.image_name for p in posed])
+            shown = still.backdrop([v.pixels for v in views], moved)
             views = views if shown is None else [replace(v, backdrop=b)
                                                  for v, b in zip(views, shown)]
         given = None if cutouts is None else [cutouts[p.image_name] for p in posed]

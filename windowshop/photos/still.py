@@ -11,9 +11,9 @@ side.
 
 The photos say so themselves. Where the phone stood still, nearly every raw match of a pair stays
 within a few pixels (STILL_SHARE), and a photo's backdrop is where it shows what most photos show
-at that pixel (the photos' per-pixel median, each photo first moved onto the first by the shift
-most of it shows, and their exposures evened) and that has texture: a turning object moves its
-texture, while a plain part of it can match the median as a plain wall does.
+at that pixel (the photos' per-pixel median, each photo first moved onto the first by the median
+move of the backdrop's matches, and their exposures evened) and that has texture: a turning
+object moves its texture, while a plain part of it can match the median as a plain wall does.
 Those pixels start GrabCut as probable background (windowshop.photos.segment): a part of the
 object that matches the median all the same (the rim of a round mug keeps its place as it
 turns) is given back by its colour.
@@ -55,27 +55,59 @@ WORK_SIDE = 320  # compared at this many pixels on the longer side
 MIN_PHOTOS = 5  # fewer photos give no median to trust
 
 
-def fixed_camera(database: Path, within: float = STATIONARY_PX) -> bool:
-    """Whether the photos matched in the COLMAP `database` were taken from one place (module
-    docstring), their backdrop moving by less than `within` pixels."""
-    shares = []
+def _stationary(database: Path, within: float) -> list[tuple[str, str, np.ndarray, float]]:
+    """(image name, image name, median move (2,) of the raw matches that move less than
+    `within` pixels from the first to the second image, their share of the pair's raw matches)
+    for every pair of MIN_MATCHES raw matches or more in the COLMAP `database`."""
+    out = []
     with pycolmap.Database.open(database) as db:
-        keypoints = {im.image_id: db.read_keypoints(im.image_id)[:, :2]
-                     for im in db.read_all_images()}
+        images = db.read_all_images()
+        names = {im.image_id: im.name for im in images}
+        keypoints = {im.image_id: db.read_keypoints(im.image_id)[:, :2] for im in images}
         for pair_id, matches in zip(*db.read_all_matches()):
             if len(matches) < MIN_MATCHES:
                 continue
             first, second = pycolmap.pair_id_to_image_pair(pair_id)
-            moved = np.linalg.norm(keypoints[first][matches[:, 0]]
-                                   - keypoints[second][matches[:, 1]], axis=1)
-            shares.append(float(np.mean(moved < within)))
+            moves = keypoints[second][matches[:, 1]] - keypoints[first][matches[:, 0]]
+            kept = np.linalg.norm(moves, axis=1) < within
+            median = np.median(moves[kept], axis=0) if kept.any() else np.zeros(2)
+            out.append((names[first], names[second], median, float(kept.mean())))
+    return out
+
+
+def fixed_camera(database: Path, within: float = STATIONARY_PX) -> bool:
+    """Whether the photos matched in the COLMAP `database` were taken from one place (module
+    docstring), their backdrop moving by less than `within` pixels."""
+    shares = [share for *_, share in _stationary(database, within)]
     return bool(shares) and float(np.median(shares)) > STILL_SHARE
 
 
-def backdrop(images: list[np.ndarray]) -> list[np.ndarray] | None:
+def shifts(database: Path, names: list[str]) -> list[np.ndarray]:
+    """(2,) pixels each image of `names` is moved by against the first, from the median move of
+    the backdrop's matches in every pair that stood still (least squares over the pairs: a
+    video's are neighbours only); 0 for an image no such pair links."""
+    index = {name: i for i, name in enumerate(names)}
+    rows, moves = [], []
+    for first, second, move, share in _stationary(database, STATIONARY_PX):
+        if share > STILL_SHARE and first in index and second in index:
+            row = np.zeros(len(names))
+            row[index[second]], row[index[first]] = 1.0, -1.0
+            rows.append(row)
+            moves.append(move)
+    if not rows:
+        return [np.zeros(2) for _ in names]
+    anchor = np.eye(len(names))[:1]  # the first image stays where it is
+    solved = np.linalg.lstsq(np.vstack([anchor] + rows), np.vstack([np.zeros((1, 2))] + moves),
+                             rcond=None)[0]
+    return list(solved)
+
+
+def backdrop(images: list[np.ndarray], moved: list[np.ndarray] | None = None
+             ) -> list[np.ndarray] | None:
     """(H, W) bool per photo of `images` ((H, W, 3) uint8, one size): the pixels showing what
-    most photos show there, once each photo's exposure is evened to the others'; None when the
-    photos differ in size or are too few."""
+    most photos show there, once each photo is moved back by its entry of `moved` ((2,) pixels
+    against the first, see shifts; none when not given) and its exposure evened to the others';
+    None when the photos differ in size or are too few."""
     if len(images) < MIN_PHOTOS or len({im.shape for im in images}) != 1:
         return None
     height, width = images[0].shape[:2]
@@ -83,12 +115,14 @@ def backdrop(images: list[np.ndarray]) -> list[np.ndarray] | None:
     size = (max(1, round(width * scale)), max(1, round(height * scale)))
     small = np.stack([cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
                      ).astype(np.float32) / 255
-    # each photo moved onto the first by the shift most of it (the backdrop) shows (a nudged
-    # phone), in whole pixels: resampling a still photo would blur its texture off the median
-    shifts = [np.round(cv2.phaseCorrelate(small[0].mean(-1), im.mean(-1))[0]) for im in small]
-    small = np.stack([_shifted(im, -dx, -dy) for im, (dx, dy) in zip(small, shifts)])
+    # each photo moved onto the first (a nudged phone); one that moved under half a pixel here is
+    # left as it is: resampling it would blur its texture off the median
+    moves = [np.zeros(2) if m is None or np.abs(m * scale).max() < 0.5 else m * scale
+             for m in (moved or [None] * len(images))]
+    small = np.stack([_shifted(im, -dx, -dy, cv2.INTER_LINEAR) if dx or dy else im
+                      for im, (dx, dy) in zip(small, moves)])
     seen = np.stack([_shifted(np.ones(im.shape[:2], np.float32), -dx, -dy) > 0.5
-                     for im, (dx, dy) in zip(small, shifts)])
+                     for im, (dx, dy) in zip(small, moves)])
     for _ in range(2):  # the median, then each photo's exposure against it, then again
         median = np.median(small, axis=0)
         grey = small.mean(-1) / np.maximum(median.mean(-1), 1e-3)
@@ -104,12 +138,13 @@ def backdrop(images: list[np.ndarray]) -> list[np.ndarray] | None:
     # a lone pixel of the object that matches by chance is no backdrop
     opened = [_shifted(cv2.morphologyEx(s.astype(np.uint8), cv2.MORPH_OPEN,
                                         np.ones((3, 3), np.uint8)), dx, dy)
-              for s, (dx, dy) in zip(still, shifts)]  # back where each photo has it
+              for s, (dx, dy) in zip(still, moves)]  # back where each photo has it
     return [cv2.resize(s, (width, height), interpolation=cv2.INTER_NEAREST) > 0 for s in opened]
 
 
-def _shifted(image: np.ndarray, dx: float, dy: float) -> np.ndarray:
-    """`image` moved by (dx, dy) whole pixels, zeros where nothing moved in."""
+def _shifted(image: np.ndarray, dx: float, dy: float, interpolation: int = cv2.INTER_NEAREST
+             ) -> np.ndarray:
+    """`image` moved by (dx, dy) pixels, zeros where nothing moved in."""
     move = np.float32([[1, 0, dx], [0, 1, dy]])
-    return cv2.warpAffine(image, move, image.shape[1::-1], flags=cv2.INTER_NEAREST,
+    return cv2.warpAffine(image, move, image.shape[1::-1], flags=interpolation,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)

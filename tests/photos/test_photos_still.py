@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from windowshop.config import PrepareOptions
+from windowshop.errors import UserError
 from windowshop.photos import still
 from windowshop.photos.prepare import prepare
 from windowshop.scene import products
@@ -70,24 +71,43 @@ def test_no_backdrop_from_photos_of_two_sizes_or_too_few():
     assert still.backdrop(photos[:-1] + [photos[-1][:100]]) is None
 
 
-def _matched(folder, tmp_path) -> bool:
-    """still.fixed_camera on the photos in `folder`, matched every pair with pycolmap."""
-    database = tmp_path / f"{folder.name}.db"
+def _matched(folder, tmp_path) -> tuple[bool, bool]:
+    """(still.fixed_camera, still.hand_held) on the photos in `folder`, matched every pair with
+    pycolmap."""
+    database = tmp_path / f"{folder.parent.name}_{folder.name}.db"
     pycolmap.extract_features(database, folder, device=pycolmap.Device.cpu)
     pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
-    return still.fixed_camera(database)
+    return still.fixed_camera(database), still.hand_held(database)
 
 
 @needs_data
-def test_a_still_phone_is_told_from_a_walk_round_by_its_raw_matches(tmp_path):
+def test_a_still_phone_is_told_from_a_held_one_and_from_a_walk_round_by_its_raw_matches(
+        tmp_path):
     frames = products.dtu_frames(SKULL)[::8]
     products.on_turntable(frames, ROOM, tmp_path / "turntable")
+    # the room moved by up to 20 px either way in each photo: a phone held in the hand
+    products.on_turntable(frames, ROOM, tmp_path / "held", nudge_px=20)
     walk = tmp_path / "walk"
     walk.mkdir()
     for frame in frames:  # the same cameras, the room really behind the skull
         Image.open(frame.image_path).save(walk / frame.image_path.name)
-    assert _matched(tmp_path / "turntable" / "images", tmp_path)
-    assert not _matched(walk, tmp_path)
+    assert _matched(tmp_path / "turntable" / "images", tmp_path) == (True, False)
+    assert _matched(tmp_path / "held" / "images", tmp_path) == (False, True)
+    assert _matched(walk, tmp_path) == (False, False)
+
+
+@needs_data
+def test_a_turntable_shot_with_the_phone_in_hand_is_refused_with_what_to_do(tmp_path):
+    """The room moved by up to 20 px in each of 13 photos: its matches are neither the object's
+    nor stationary, hold every photo at one spot, and no object is found. The refusal asked for
+    a walk round the object; it now asks for the phone to be propped up, and leaves no scene."""
+    frames = products.dtu_frames(SKULL)[::4]
+    products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=20)
+    with pytest.raises(UserError, match="prop the phone up") as refused:
+        prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
+                show=False)
+    assert "walk round the object instead" in str(refused.value)
+    assert not (tmp_path / "scene" / "transforms.json").exists()
 
 
 @needs_data

@@ -444,7 +444,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         inputs = gather_inputs(source, work)
         photos, dropped = _read(inputs, options, stages)
         dark = [_shown(p) for p in photos if underexposed(p.pixels)]
-        with _light_blamed(dark, len(photos)):
+        with _light_blamed(dark, len(photos)), _hand_held_blamed(work):
             transforms, summary = _pose(source, out_dir, work, inputs, photos, dropped, dark,
                                         options, stages)
     report.write_report(out_dir, summary)
@@ -500,6 +500,26 @@ def _light_blamed(dark: list[str], count: int):
             raise
         raise UserError(f"{err}\n{len(dark)} of {count} photos are dark: more light, or tap the "
                         "object on the phone's screen so that it sets the exposure by it") from err
+
+
+HAND_HELD = ("the room behind the object stays in about the same place in every photo while the "
+             "object turns, so the photos were taken from one spot, the phone moving a little "
+             "between them, and the room's matches hold the phone at that spot: prop the phone up "
+             "(a stand, a stack of books) and keep it still while you turn the object, or walk "
+             "round the object instead")
+
+
+@contextlib.contextmanager
+def _hand_held_blamed(work: Path):
+    """A refusal that says the phone was held while the object turned (still.hand_held) when
+    the photos' matches in `work` show it: what a walk's advice would only mislead."""
+    try:
+        yield
+    except UserError as err:
+        database = work / "database_default.db"
+        if type(err) is not UserError or not database.exists() or not still.hand_held(database):
+            raise
+        raise UserError(f"{HAND_HELD} (what failed: {err})") from err
 
 
 def check_intrinsics(values: tuple | None) -> None:

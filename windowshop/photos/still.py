@@ -22,6 +22,13 @@ A phone propped up moves a few pixels when its shutter is tapped. Its backdrop's
 move past COLMAP's stationary 4 px, are kept, and hold every photo at one spot; so the pairs of
 a phone that stood still, but not at its very pixel, are verified again with STATIONARY_PX as
 the stationary bound (windowshop.photos.sfm.match).
+
+A phone held in the hand while the object turns moves further between shots (a hand's wobble of
+a degree or two is 10-30 px): its backdrop's matches are then neither stationary nor the
+object's, they hold every photo at about one spot, and the object is not found. `hand_held` tells
+such photos by their backdrop all the same (the median pair's raw matches mostly fit one
+homography that moves the photo by little, HELD_SHARE), so that the refusal asks for the phone
+to be propped up instead of for a walk round (windowshop.photos.prepare).
 """
 
 from __future__ import annotations
@@ -44,6 +51,15 @@ STILL_PX = 2.0  # ... and one that moves less than this stayed at its very pixel
 # granite figure, the doppelganger carton; 20 neighbouring frames of beer_can's and of fruit's
 # walks) but skull_up's 0.18 (DTU's close viewpoints), their 90th percentile pairs at most 0.45
 STILL_SHARE = 0.5
+# A homography moving no corner of the photo by more than this share of its longer side is a
+# hand's wobble (a turn of 3 degrees at a phone's focal length), not a step of a walk round.
+# Measured at 640 px on the pairs prepare matches, the share of each pair's raw matches that such
+# a homography explains (RANSAC, 3 px): dtu_skull's photos over one room photo shifted by up to
+# 20 px, median pair 0.96; every walk round 0.00 at the median (kermit, fruit's 20 neighbouring
+# and 20 spread photos, beer_can's likewise, temple, dtu_skull, the granite figure, the
+# doppelganger carton; their 90th percentile 0.00 but temple's 0.46), their median pair's
+# corners moving 131-1670 px
+HELD_SHARE = 0.08
 TOLERANCE = 0.05  # a pixel this close to the median (of full scale, every channel): backdrop
 # ... where the median has texture: Sobel |dx| + |dy| of its grey (0-1), averaged over 5 x 5
 # pixels, over this. dtu_skull turned over six backdrops (kermit's room, beer_can's tiles,
@@ -80,6 +96,43 @@ def fixed_camera(database: Path, within: float = STATIONARY_PX) -> bool:
     docstring), their backdrop moving by less than `within` pixels."""
     shares = [share for *_, share in _stationary(database, within)]
     return bool(shares) and float(np.median(shares)) > STILL_SHARE
+
+
+def _wobbles(database: Path) -> list[float]:
+    """For every pair of MIN_MATCHES raw matches or more in the COLMAP `database`, the share of
+    them that one homography moving no corner by more than HELD_SHARE explains (0 when the
+    pair's best homography moves further)."""
+    out = []
+    with pycolmap.Database.open(database) as db:
+        images = {im.image_id: im for im in db.read_all_images()}
+        cameras = {c.camera_id: c for c in db.read_all_cameras()}
+        keypoints = {i: db.read_keypoints(i)[:, :2] for i in images}
+        for pair_id, matches in zip(*db.read_all_matches()):
+            if len(matches) < MIN_MATCHES:
+                continue
+            first, second = pycolmap.pair_id_to_image_pair(pair_id)
+            camera = cameras[images[first].camera_id]
+            homography, inliers = cv2.findHomography(keypoints[first][matches[:, 0]],
+                                                     keypoints[second][matches[:, 1]],
+                                                     cv2.RANSAC, 3.0)
+            if homography is None:
+                out.append(0.0)
+                continue
+            corners = np.float32([[0, 0], [camera.width, 0], [camera.width, camera.height],
+                                  [0, camera.height]]).reshape(-1, 1, 2)
+            moved = np.abs(cv2.perspectiveTransform(corners, homography) - corners).max()
+            near = moved <= HELD_SHARE * max(camera.width, camera.height)
+            out.append(float(inliers.mean()) if near else 0.0)
+    return out
+
+
+def hand_held(database: Path) -> bool:
+    """Whether the photos matched in the COLMAP `database` keep their backdrop nearly in place,
+    as a phone held in the hand while the object turns does, without standing still
+    (fixed_camera): module docstring."""
+    shares = _wobbles(database)
+    return (bool(shares) and float(np.median(shares)) > STILL_SHARE
+            and not fixed_camera(database))
 
 
 def shifts(database: Path, names: list[str]) -> list[np.ndarray]:

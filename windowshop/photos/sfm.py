@@ -328,6 +328,11 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
             break  # nearly all placed: not worth extracting everything again
         if lowest and (_placed(best) >= fill.MIN_PLACED or len(names) > WIDE_MAX_PHOTOS):
             break  # enough to fit the ring: fewer inliers a view would risk wrong poses
+        if label == "relaxed" and still.hand_held(database):
+            # the object turned before a phone held in the hand: the room's matches hold every
+            # photo at one spot whatever the retry (25 such photos: refused after 120 s, 82 s
+            # of them retrying); prepare's refusal says why
+            break
         start = time.perf_counter()
         suffix = "" if i == 0 else f" ({label})"
         if i == 0 or wide:  # (re)compute features and matches, kept apart for the ring's use

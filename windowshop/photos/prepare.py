@@ -38,7 +38,8 @@ from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gath
 from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
-from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
+from windowshop.photos.sfm import (MIN_KEYPOINTS, SfmResult, SfmSettings, attempt_database,
+                                   reconstruct)
 from windowshop.photos.verify.silhouettes import FIT_VIEWS
 from windowshop.rays import project
 from windowshop.scene import normalize
@@ -516,7 +517,7 @@ def _hand_held_blamed(work: Path):
     try:
         yield
     except UserError as err:
-        database = work / "database_default.db"
+        database = attempt_database(work)
         if type(err) is not UserError or not database.exists() or not still.hand_held(database):
             raise
         raise UserError(f"{HAND_HELD} (what failed: {err})") from err

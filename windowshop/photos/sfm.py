@@ -311,6 +311,11 @@ def _placed(model: pycolmap.Reconstruction | None) -> int:
     return 0 if model is None else model.num_reg_images()
 
 
+def attempt_database(work: Path, label: str = "default") -> Path:
+    """The COLMAP database that reconstruct's attempt `label` matches into, in `work`."""
+    return work / f"database_{label}.db"
+
+
 def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSettings,
                 stages: Stages) -> SfmResult:
     """Structure from motion on the images `names` (file names in `image_dir`); `work` is scratch.
@@ -336,7 +341,7 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
         start = time.perf_counter()
         suffix = "" if i == 0 else f" ({label})"
         if i == 0 or wide:  # (re)compute features and matches, kept apart for the ring's use
-            database = work / f"database_{label}.db"
+            database = attempt_database(work, label)
             with stages.stage("finding features" + suffix, len(names)) as advance:
                 keypoints = extract(database, image_dir, names, settings, wide, advance)
             if sum(k >= MIN_KEYPOINTS for k in keypoints.values()) < 3:

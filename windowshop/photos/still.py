@@ -71,23 +71,31 @@ WORK_SIDE = 320  # compared at this many pixels on the longer side
 MIN_PHOTOS = 5  # fewer photos give no median to trust
 
 
+def _raw_pairs(database: Path):
+    """(first image's name, second's, the first's (width, height), (N, 2) pixels in the first,
+    (N, 2) pixels in the second) of every pair of MIN_MATCHES raw matches or more in the COLMAP
+    `database`."""
+    with pycolmap.Database.open(database) as db:
+        cameras = {c.camera_id: (c.width, c.height) for c in db.read_all_cameras()}
+        images = {im.image_id: (im.name, cameras[im.camera_id]) for im in db.read_all_images()}
+        keypoints = {i: db.read_keypoints(i)[:, :2] for i in images}
+        for pair_id, matches in zip(*db.read_all_matches()):
+            if len(matches) >= MIN_MATCHES:
+                first, second = pycolmap.pair_id_to_image_pair(pair_id)
+                yield (images[first][0], images[second][0], images[first][1],
+                       keypoints[first][matches[:, 0]], keypoints[second][matches[:, 1]])
+
+
 def _stationary(database: Path, within: float) -> list[tuple[str, str, np.ndarray, float]]:
     """(image name, image name, median move (2,) of the raw matches that move less than
     `within` pixels from the first to the second image, their share of the pair's raw matches)
-    for every pair of MIN_MATCHES raw matches or more in the COLMAP `database`."""
+    for every pair of _raw_pairs."""
     out = []
-    with pycolmap.Database.open(database) as db:
-        images = db.read_all_images()
-        names = {im.image_id: im.name for im in images}
-        keypoints = {im.image_id: db.read_keypoints(im.image_id)[:, :2] for im in images}
-        for pair_id, matches in zip(*db.read_all_matches()):
-            if len(matches) < MIN_MATCHES:
-                continue
-            first, second = pycolmap.pair_id_to_image_pair(pair_id)
-            moves = keypoints[second][matches[:, 1]] - keypoints[first][matches[:, 0]]
-            kept = np.linalg.norm(moves, axis=1) < within
-            median = np.median(moves[kept], axis=0) if kept.any() else np.zeros(2)
-            out.append((names[first], names[second], median, float(kept.mean())))
+    for first, second, _, here, there in _raw_pairs(database):
+        moves = there - here
+        kept = np.linalg.norm(moves, axis=1) < within
+        median = np.median(moves[kept], axis=0) if kept.any() else np.zeros(2)
+        out.append((first, second, median, float(kept.mean())))
     return out
 
 
@@ -99,30 +107,17 @@ def fixed_camera(database: Path, within: float = STATIONARY_PX) -> bool:
 
 
 def _wobbles(database: Path) -> list[float]:
-    """For every pair of MIN_MATCHES raw matches or more in the COLMAP `database`, the share of
-    them that one homography moving no corner by more than HELD_SHARE explains (0 when the
-    pair's best homography moves further)."""
+    """For every pair of _raw_pairs, the share of its raw matches that one homography moving no
+    corner by more than HELD_SHARE explains (0 when the pair's best homography moves further)."""
     out = []
-    with pycolmap.Database.open(database) as db:
-        images = {im.image_id: im for im in db.read_all_images()}
-        cameras = {c.camera_id: c for c in db.read_all_cameras()}
-        keypoints = {i: db.read_keypoints(i)[:, :2] for i in images}
-        for pair_id, matches in zip(*db.read_all_matches()):
-            if len(matches) < MIN_MATCHES:
-                continue
-            first, second = pycolmap.pair_id_to_image_pair(pair_id)
-            camera = cameras[images[first].camera_id]
-            homography, inliers = cv2.findHomography(keypoints[first][matches[:, 0]],
-                                                     keypoints[second][matches[:, 1]],
-                                                     cv2.RANSAC, 3.0)
-            if homography is None:
-                out.append(0.0)
-                continue
-            corners = np.float32([[0, 0], [camera.width, 0], [camera.width, camera.height],
-                                  [0, camera.height]]).reshape(-1, 1, 2)
-            moved = np.abs(cv2.perspectiveTransform(corners, homography) - corners).max()
-            near = moved <= HELD_SHARE * max(camera.width, camera.height)
-            out.append(float(inliers.mean()) if near else 0.0)
+    for _, _, (width, height), here, there in _raw_pairs(database):
+        homography, inliers = cv2.findHomography(here, there, cv2.RANSAC, 3.0)
+        if homography is None:
+            out.append(0.0)
+            continue
+        corners = np.float32([[0, 0], [width, 0], [width, height], [0, height]]).reshape(-1, 1, 2)
+        moved = np.abs(cv2.perspectiveTransform(corners, homography) - corners).max()
+        out.append(float(inliers.mean()) if moved <= HELD_SHARE * max(width, height) else 0.0)
     return out
 
 

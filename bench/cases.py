@@ -1,7 +1,7 @@
 """Build the captures with known answers that the shared data lacks, for bench_verify's `--extra`,
 each as a folder with images/ and a ground-truth transforms.json (one JSON line per case).
 
-    python bench/cases.py OUT [--only doppelganger,granite,skull_up,skull_turntable,
+    python bench/cases.py OUT [--only doppelganger,granite,skull_up,skull_turntable,skull_held,
                                       fruit_rolled,fruit_mixed,beer_loop] [--seed 0]
     python bench/bench_verify.py --extra doppelganger=OUT/doppelganger --extra granite=OUT/granite \
         --extra skull_up=OUT/skull_up --extra fruit_rolled=OUT/fruit_rolled \
@@ -17,6 +17,8 @@ each as a folder with images/ and a ground-truth transforms.json (one JSON line 
   skull_turntable  every other dtu_skull photo (25), the skull (its hand-made mask) over one
                 photo of a room (kermit000): the photos of a phone that stood still while the
                 object turned in front of it (products.on_turntable);
+  skull_held    skull_turntable with the room shifted by up to 20 px either way in each photo:
+                a phone held in the hand while the object turned (nudge_px=20);
   fruit_rolled  every fruit photo (81) rolled by quarters in turn, 0/90/180/270 degrees (the
                 phone held every way), with each frame's gravity: the up vector's case;
   fruit_mixed   every fruit photo (81), every other one given in landscape: the whole frame
@@ -60,6 +62,12 @@ def skull_up(out: Path, seed: int) -> Path:
 def skull_turntable(out: Path, seed: int) -> Path:
     frames = products.dtu_frames(DATA / "dtu_skull")[seed % 2::2]
     return products.on_turntable(frames, DATA / "kermit" / f"kermit{seed % 11:03d}.jpg", out)
+
+
+def skull_held(out: Path, seed: int) -> Path:
+    frames = products.dtu_frames(DATA / "dtu_skull")[seed % 2::2]
+    return products.on_turntable(frames, DATA / "kermit" / f"kermit{seed % 11:03d}.jpg", out,
+                                 nudge_px=20, seed=seed)
 
 
 def fruit_rolled(out: Path, seed: int) -> Path:
@@ -118,6 +126,7 @@ BUILDERS = {
     "granite": lambda out, seed: products.figure_on_granite(out, 20, (640, 480), seed),
     "skull_up": skull_up,
     "skull_turntable": skull_turntable,
+    "skull_held": skull_held,
     "fruit_rolled": fruit_rolled,
     "fruit_mixed": fruit_mixed,
     "beer_loop": beer_loop,

@@ -5,7 +5,9 @@ object by what every photo shows at a pixel."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import cv2
 import numpy as np
 import pycolmap
 import pytest
@@ -13,8 +15,9 @@ from PIL import Image
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
-from windowshop.photos import still
+from windowshop.photos import align, still
 from windowshop.photos.prepare import prepare
+from windowshop.photos.report import summary_lines
 from windowshop.scene import products
 
 from shared_data import DATA
@@ -96,17 +99,111 @@ def test_a_still_phone_is_told_from_a_held_one_and_from_a_walk_round_by_its_raw_
     assert _matched(walk, tmp_path) == (False, False)
 
 
+def _nudges(count: int, nudge: int, seed: int = 0) -> list[np.ndarray]:
+    """The (dx, dy) by which products.on_turntable shifted the room in each of `count` photos."""
+    rng = np.random.default_rng(seed)
+    return [rng.integers(0, 2 * nudge + 1, 2).astype(float) for _ in range(count)]
+
+
 @needs_data
-def test_a_turntable_shot_with_the_phone_in_hand_is_refused_with_what_to_do(tmp_path):
+def test_a_held_phones_photos_are_moved_back_by_their_rooms_known_shift(tmp_path):
+    """Photo i shows the room's point at its pixel p + d_i (d_i its shift), so its pixel p is
+    the reference's p + d_i - d_ref: the homography steadying finds must say so."""
+    frames = products.dtu_frames(SKULL)[::8]
+    products.on_turntable(frames, ROOM, tmp_path / "held", nudge_px=20)
+    folder = tmp_path / "held" / "images"
+    database = tmp_path / "held.db"
+    pycolmap.extract_features(database, folder, device=pycolmap.Device.cpu)
+    pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
+    names = sorted(p.name for p in folder.iterdir())
+    moves = still.steadying(database, names)
+    assert moves is not None and set(moves) == set(names)
+    reference = [n for n, h in moves.items() if np.allclose(h, np.eye(3))]
+    assert len(reference) == 1
+    shift = dict(zip(names, _nudges(len(names), 20)))
+    width, height = Image.open(folder / names[0]).size
+    points = np.float32([[width / 2, height / 2], [60, 60], [width - 60, height - 60]])
+    for name, homography in moves.items():
+        moved = cv2.perspectiveTransform(points.reshape(-1, 1, 2), homography).reshape(-1, 2)
+        expected = points + shift[name] - shift[reference[0]]
+        assert np.abs(moved - expected).max() < 1.5, (name, moved - expected)
+
+
+def test_steadied_photos_keep_what_all_of_them_show_about_their_centre():
+    image = np.random.default_rng(0).integers(0, 255, (80, 100, 3), dtype=np.uint8)
+    def moving(dx, dy):
+        return np.array([[1.0, 0, dx], [0, 1, dy], [0, 0, 1]])
+    moves = {"a": np.eye(3), "b": moving(5, -3), "c": moving(-8, 2)}
+    box = still.steady_box(moves, (100, 80))
+    assert box == (8, 3, 92, 77)  # the widest cut on either side, from both sides
+    shown = still.steadied(image, moves["b"], box)
+    assert shown.shape == (74, 84, 3)
+    # b's pixel (x, y) lands at (x + 5, y - 3): the cut's (0, 0) is b's (8 - 5, 3 + 3)
+    assert np.array_equal(shown, image[6:80, 3:87])
+    assert np.array_equal(still.steadied(image, moves["a"], box), image[3:77, 8:92])
+    # moved further than MIN_KEPT allows: not steadied
+    assert still.steady_box({"a": np.eye(3), "b": moving(11, 0)}, (100, 80)) is None
+
+
+def _scene_ious(scene, frames, steadied=None) -> list[float]:
+    """Mask IoU of each of the `scene`'s photos against the hand-made mask of its frame of
+    `frames`, moved and cut as report.json's `steadied` says when given."""
+    report = json.loads((scene / "report.json").read_text())
+    stems = {v["name"]: v["photo"].rsplit("/", 1)[-1].rsplit(".", 1)[0] for v in report["views"]}
+    truth = {f.image_path.stem: f.mask_path for f in frames}
+    ious = []
+    for mask in (scene / "masks").glob("*.png"):
+        ours = np.asarray(Image.open(mask)) > 127
+        hand = np.asarray(Image.open(truth[stems[mask.stem]]).convert("L"))
+        if steadied is not None:  # at the photos' size (the box is cut evenly from both sides)
+            left, top, right, bottom = steadied["box"]
+            hand = np.asarray(Image.fromarray(hand).resize((left + right, top + bottom)))
+            hand = still.steadied(hand, np.array(steadied["moves"][mask.stem]), steadied["box"])
+        hand = np.asarray(Image.fromarray(hand).resize(ours.shape[::-1])) > 127
+        ious.append((ours & hand).sum() / (ours | hand).sum())
+    return ious
+
+
+@needs_data
+def test_a_turntable_shot_with_the_phone_in_hand_is_steadied_and_delivered(tmp_path):
     """The room moved by up to 20 px in each of 13 photos: its matches are neither the object's
-    nor stationary, hold every photo at one spot, and no object is found. The refusal asked for
-    a walk round the object; it now asks for the phone to be propped up, and leaves no scene."""
+    nor stationary, held every photo at one spot, and the capture was refused. Each photo is
+    now moved so that the room stays still, cut to what all show, and posed and masked as a
+    propped phone's photos are."""
     frames = products.dtu_frames(SKULL)[::4]
     products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=20)
+    result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
+                     show=False)
+    steadied = result.report["steadied"]
+    assert steadied is not None and result.report["masks"] == "still"
+    assert any("held in the hand" in line for line in summary_lines(result.report))
+    left, top, right, bottom = steadied["box"]
+    assert 0 < left <= 40 and 0 < top <= 40  # cut by the room's widest shift, at most 2 x 20
+    scene = json.loads((tmp_path / "scene" / "transforms.json").read_text())
+    assert (scene["w"], scene["h"]) == (right - left, bottom - top)
+    truth = json.loads((tmp_path / "capture" / "transforms.json").read_text())
+    stems = {v["name"]: Path(v["photo"]).stem for v in result.report["views"]}
+    true_c2w = {Path(f["file_path"]).stem: np.array(f["transform_matrix"]) for f in truth["frames"]}
+    ours = {stems[Path(f["file_path"]).stem]: np.array(f["transform_matrix"])
+            for f in scene["frames"]}
+    errors = align.pose_errors(ours, true_c2w).rotation_deg
+    assert len(errors) >= len(frames) - 2 and np.median(errors) <= 3.0, errors
+    ious = _scene_ious(tmp_path / "scene", frames, steadied)
+    assert len(ious) >= len(frames) - 2
+    assert np.mean(ious) >= 0.9 and min(ious) >= 0.75, ious
+
+
+@needs_data
+def test_a_held_phones_turntable_that_steadying_cannot_save_is_refused_with_what_to_do(tmp_path):
+    """5 photos 10 frames apart, the phone held: steadied, 3 are placed; the refusal asks for
+    the phone to be propped up and the object turned in smaller steps, not only for a walk
+    round, and leaves no scene."""
+    products.on_turntable(products.dtu_frames(SKULL)[::10], ROOM, tmp_path / "capture",
+                          nudge_px=20)
     with pytest.raises(UserError, match="prop the phone up") as refused:
         prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
                 show=False)
-    assert "walk round the object instead" in str(refused.value)
+    assert "turn the object in smaller steps" in str(refused.value)
     assert not (tmp_path / "scene" / "transforms.json").exists()
 
 
@@ -124,15 +221,7 @@ def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path, nudge):
     products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=nudge)
     result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
                      show=False)
-    assert result.report["masks"] == "still"
-    report = json.loads((tmp_path / "scene" / "report.json").read_text())
-    stems = {v["name"]: v["photo"].rsplit("/", 1)[-1].rsplit(".", 1)[0] for v in report["views"]}
-    truth = {f.image_path.stem: f.mask_path for f in frames}
-    ious = []
-    for mask in (tmp_path / "scene" / "masks").glob("*.png"):
-        ours = np.asarray(Image.open(mask)) > 127
-        hand = np.asarray(Image.open(truth[stems[mask.stem]]).convert("L")
-                          .resize(ours.shape[::-1])) > 127
-        ious.append((ours & hand).sum() / (ours | hand).sum())
+    assert result.report["masks"] == "still" and result.report["steadied"] is None
+    ious = _scene_ious(tmp_path / "scene", frames)
     assert len(ious) >= len(frames) - 2
     assert np.mean(ious) >= 0.9 and min(ious) >= 0.75, ious

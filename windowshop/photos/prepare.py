@@ -470,6 +470,11 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
                            orient.for_sfm(photo.pixels) if turn else photo.pixels)
     pixels = {f"{p.name}.jpg": p.pixels for p in photos}  # by image file name, as taken
     sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
+    steady = _steady(sfm, work, pixels, settings) if sfm.held else None
+    if steady is not None:  # the steadied photos are what is posed, masked and delivered
+        work, pixels, settings = steady.work, steady.pixels, steady.settings
+        image_dir = work / "images"
+        sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
     matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
     shown = {f"{p.name}.jpg": _shown(p) for p in photos}
     check_placed(sfm, len(photos), shown)
@@ -484,10 +489,49 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
     summary["exposures"] = {name.rsplit(".", 1)[0]: [round(float(v), 3) for v in e]
                             for name, e in exposures.items()}
     summary["verification"] = _verification(choice, options.force)
+    summary["steadied"] = None if steady is None else steady.as_report()
     summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
                                          found.plane is not None,
                                          matcher)
     return transforms, summary
+
+
+@dataclass
+class Steady:
+    """Photos of a phone held in the hand while the object turned, moved so that their backdrop
+    stays still (windowshop.photos.still.steadying) and cut to what all of them show."""
+
+    work: Path  # the scratch folder they are posed in, their images in images/
+    pixels: dict[str, np.ndarray]  # by image file name
+    settings: SfmSettings  # known intrinsics moved with the cut
+    moves: dict[str, np.ndarray]  # (3, 3) homography by image file name
+    box: tuple[int, int, int, int]  # left, top, right, bottom of the photos as taken
+
+    def as_report(self) -> dict:
+        return {"box": list(self.box),
+                "moves": {name.rsplit(".", 1)[0]: np.round(h, 6).tolist()
+                          for name, h in self.moves.items()}}
+
+
+def _steady(sfm: SfmResult, work: Path, pixels: dict[str, np.ndarray], settings: SfmSettings
+            ) -> Steady | None:
+    """The photos `pixels` (by image file name) steadied into `work`/steady, when structure from
+    motion found them held in the hand (`sfm.held`); None when they cannot be (photos turned a
+    quarter, a photo tied to none, a wobble too wide to cut)."""
+    moves = None if settings.turned else still.steadying(sfm.database, list(pixels))
+    sizes = {image.shape[1::-1] for image in pixels.values()}
+    box = None if moves is None or len(sizes) != 1 else still.steady_box(moves, sizes.pop())
+    if box is None:
+        return None
+    steady = work / "steady"
+    (steady / "images").mkdir(parents=True)
+    moved = {name: still.steadied(image, moves[name], box) for name, image in pixels.items()}
+    for name, image in moved.items():
+        output.write_image(steady, name.rsplit(".", 1)[0], image)
+    if settings.intrinsics is not None:  # the principal point moves with the cut
+        fx, fy, cx, cy = settings.intrinsics
+        settings = replace(settings, intrinsics=(fx, fy, cx - box[0], cy - box[1]))
+    return Steady(steady, moved, settings, moves, box)
 
 
 @contextlib.contextmanager
@@ -503,17 +547,17 @@ def _light_blamed(dark: list[str], count: int):
                         "object on the phone's screen so that it sets the exposure by it") from err
 
 
-HAND_HELD = ("the room behind the object stays in about the same place in every photo while the "
-             "object turns, so the photos were taken from one spot, the phone moving a little "
-             "between them, and the room's matches hold the phone at that spot: prop the phone up "
-             "(a stand, a stack of books) and keep it still while you turn the object, or walk "
-             "round the object instead")
+HAND_HELD = ("the photos were taken from one spot, the phone held in the hand while the object "
+             "turned, and even moved so that the room behind the object stays still they could "
+             "not be placed: prop the phone up (a stand, a stack of books) and keep it still "
+             "while you turn the object in smaller steps, or walk round the object instead")
 
 
 @contextlib.contextmanager
 def _hand_held_blamed(work: Path):
     """A refusal that says the phone was held while the object turned (still.hand_held) when
-    the photos' matches in `work` show it: what a walk's advice would only mislead."""
+    the photos' matches in `work` show it, and steadying them did not help: what a walk's advice
+    would only mislead."""
     try:
         yield
     except UserError as err:

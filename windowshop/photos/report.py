@@ -52,9 +52,14 @@ def summary_lines(report: dict) -> list[str]:
         how = {"given": "the photos' own transparency", "colour": "the plain background",
                "segmented": "colour, seeded by the object's points above the surface it stands on",
                "still": "colour, seeded by the object's points and by the backdrop that stays "
-                        "put behind it (the phone stood still while the object turned)",
+                        "put behind it (the phone stayed in one place while the object turned)",
                "rembg": "rembg's matting"}
         lines.append(f"  foreground masks made from {how[report['masks']]}")
+    if report.get("steadied"):
+        left, top = report["steadied"]["box"][:2]
+        lines.append(f"  the phone moved a little between photos (held in the hand): each photo "
+                     f"was moved to keep the room still, and cut by {left} px at each side and "
+                     f"{top} px at the top and bottom")
     if report.get("priors", {}).get("capture"):
         lines.append(f"  {report['priors']['summary']}")
     return lines + _verification_lines(report.get("verification"))

@@ -115,7 +115,7 @@ class Attempt:
 class SfmResult:
     """The best model found, and what it could not place."""
 
-    reconstruction: pycolmap.Reconstruction
+    reconstruction: pycolmap.Reconstruction | None  # None when none was built
     placed: list[str]  # image file names with a measured pose
     unplaced: list[str]  # image file names without a pose
     keypoints: dict[str, int]  # image file name -> SIFT features found
@@ -127,6 +127,9 @@ class SfmResult:
     ring_method: dict[str, str] = field(default_factory=dict)  # guessed name -> how
     database: Path | None = None  # the features and verified pairs the model is checked against
     turned: frozenset[str] = frozenset()  # images turned a quarter (windowshop.photos.orient)
+    # taken by a phone held in the hand while the object turned (windowshop.photos.still): not
+    # mapped, as the backdrop's matches would hold every photo at one spot
+    held: bool = False
 
 
 def quiet_logging(verbose: bool) -> None:
@@ -333,11 +336,6 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
             break  # nearly all placed: not worth extracting everything again
         if lowest and (_placed(best) >= fill.MIN_PLACED or len(names) > WIDE_MAX_PHOTOS):
             break  # enough to fit the ring: fewer inliers a view would risk wrong poses
-        if label == "relaxed" and still.hand_held(database):
-            # the object turned before a phone held in the hand: the room's matches hold every
-            # photo at one spot whatever the retry (25 such photos: refused after 120 s, 82 s
-            # of them retrying); prepare's refusal says why
-            break
         start = time.perf_counter()
         suffix = "" if i == 0 else f" ({label})"
         if i == 0 or wide:  # (re)compute features and matches, kept apart for the ring's use
@@ -351,6 +349,13 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                       file=sys.stderr)
             with stages.stage("matching" + suffix, len(name_pairs)) as advance:
                 match(database, work, name_pairs, settings, wide, advance)
+            if i == 0 and still.hand_held(database):
+                # the object turned before a phone held in the hand: the room's matches would
+                # hold every photo at one spot whatever the attempt (25 such photos: 0 placed
+                # in 22 s, then 82 s of retries); prepare steadies them first
+                return SfmResult(reconstruction=None, placed=[], unplaced=sorted(names),
+                                 keypoints=keypoints, matcher=matcher, pairs=len(name_pairs),
+                                 database=database, turned=settings.turned, held=True)
         with stages.stage("placing cameras" + suffix, len(names)) as advance:
             # the relaxed mapper grows the first model rather than mapping all again (fruit's 78
             # photos: 7.0 s -> 1.2-2.9 s, the default having placed 45 of them)

@@ -60,6 +60,9 @@ STILL_SHARE = 0.5
 # doppelganger carton; their 90th percentile 0.00 but temple's 0.46), their median pair's
 # corners moving 131-1670 px
 HELD_SHARE = 0.08
+# Pairs whose wobble is measured: the check runs on every capture (RANSAC on fruit's 319 pairs
+# took 0.56 s), and the median of this many spread over them tells a hand-held capture
+HELD_SAMPLE = 40
 TOLERANCE = 0.05  # a pixel this close to the median (of full scale, every channel): backdrop
 # ... where the median has texture: Sobel |dx| + |dy| of its grey (0-1), averaged over 5 x 5
 # pixels, over this. dtu_skull turned over six backdrops (kermit's room, beer_can's tiles,
@@ -69,6 +72,7 @@ TOLERANCE = 0.05  # a pixel this close to the median (of full scale, every chann
 TEXTURE = 0.05
 WORK_SIDE = 320  # compared at this many pixels on the longer side
 MIN_PHOTOS = 5  # fewer photos give no median to trust
+MIN_KEPT = 0.8  # steadied photos that keep less of their width or height than this: not steadied
 
 
 def _raw_pairs(database: Path):
@@ -106,19 +110,29 @@ def fixed_camera(database: Path, within: float = STATIONARY_PX) -> bool:
     return bool(shares) and float(np.median(shares)) > STILL_SHARE
 
 
+def _wobble(here: np.ndarray, there: np.ndarray, size: tuple[int, int]
+            ) -> tuple[np.ndarray | None, float]:
+    """(the homography of the raw matches `here` -> `there` (N, 2), the share of them it
+    explains) when it moves no corner of a photo of `size` (width, height) by more than
+    HELD_SHARE of its longer side, else (None, 0)."""
+    homography, inliers = cv2.findHomography(here, there, cv2.RANSAC, 3.0)
+    if homography is None:
+        return None, 0.0
+    width, height = size
+    corners = np.float32([[0, 0], [width, 0], [width, height], [0, height]]).reshape(-1, 1, 2)
+    moved = np.abs(cv2.perspectiveTransform(corners, homography) - corners).max()
+    if moved > HELD_SHARE * max(width, height):
+        return None, 0.0
+    return homography, float(inliers.mean())
+
+
 def _wobbles(database: Path) -> list[float]:
-    """For every pair of _raw_pairs, the share of its raw matches that one homography moving no
-    corner by more than HELD_SHARE explains (0 when the pair's best homography moves further)."""
-    out = []
-    for _, _, (width, height), here, there in _raw_pairs(database):
-        homography, inliers = cv2.findHomography(here, there, cv2.RANSAC, 3.0)
-        if homography is None:
-            out.append(0.0)
-            continue
-        corners = np.float32([[0, 0], [width, 0], [width, height], [0, height]]).reshape(-1, 1, 2)
-        moved = np.abs(cv2.perspectiveTransform(corners, homography) - corners).max()
-        out.append(float(inliers.mean()) if moved <= HELD_SHARE * max(width, height) else 0.0)
-    return out
+    """For HELD_SAMPLE pairs of _raw_pairs spread over them (or all when fewer), the share of
+    its raw matches that one homography moving no corner by more than HELD_SHARE explains (0
+    when the pair's best homography moves further)."""
+    pairs = list(_raw_pairs(database))
+    return [_wobble(here, there, size)[1]
+            for *_, size, here, there in pairs[::max(1, len(pairs) // HELD_SAMPLE)]]
 
 
 def hand_held(database: Path) -> bool:
@@ -128,6 +142,62 @@ def hand_held(database: Path) -> bool:
     shares = _wobbles(database)
     return (bool(shares) and float(np.median(shares)) > STILL_SHARE
             and not fixed_camera(database))
+
+
+def steadying(database: Path, names: list[str]) -> dict[str, np.ndarray] | None:
+    """(3, 3) homography per image of `names` (the images matched in the COLMAP `database`)
+    moving its pixels onto those of the image most tied to the others, so that a hand-held
+    phone's backdrop stays still; None when some image is not tied. A pair is a tie when a
+    hand's wobble (_wobble) explains over STILL_SHARE of its raw matches, and each image joins
+    by the strongest tie it has to those already joined (a maximum spanning tree): a pair the
+    object fills is a weaker tie than one of the room."""
+    ties = {}
+    for first, second, size, here, there in _raw_pairs(database):
+        homography, share = _wobble(here, there, size)
+        if share > STILL_SHARE and first in names and second in names:
+            ties[first, second] = (share, homography)  # moves first's pixels onto second's
+    strength = {n: sum(share for pair, (share, _) in ties.items() if n in pair) for n in names}
+    onto = {max(names, key=strength.get): np.eye(3)}
+    while len(onto) < len(names):
+        joining = [pair for pair in ties if (pair[0] in onto) != (pair[1] in onto)]
+        if not joining:
+            return None
+        first, second = max(joining, key=lambda pair: ties[pair][0])
+        homography = ties[first, second][1]
+        if first in onto:
+            onto[second] = onto[first] @ np.linalg.inv(homography)
+        else:
+            onto[first] = onto[second] @ homography
+    return onto
+
+
+def steady_box(moves: dict[str, np.ndarray], size: tuple[int, int]
+               ) -> tuple[int, int, int, int] | None:
+    """(left, top, right, bottom) pixels that every photo of `size` (width, height) still covers
+    once moved by its homography in `moves` (steadying), cut evenly from both sides so that the
+    photos' centre stays their centre (where structure from motion puts the principal point);
+    None when that keeps less than MIN_KEPT of the width or the height."""
+    width, height = size
+    corners = np.float32([[0, 0], [width, 0], [width, height], [0, height]]).reshape(-1, 1, 2)
+    cut = np.zeros(2)  # pixels lost at each side, across and down
+    for homography in moves.values():
+        (x0, y0), (x1, y1), (x2, y2), (x3, y3) = cv2.perspectiveTransform(
+            corners, homography).reshape(4, 2)
+        cut = np.maximum(cut, [max(x0, x3, width - x1, width - x2),
+                               max(y0, y1, height - y2, height - y3)])
+    across, down = (int(np.ceil(c)) for c in cut)
+    if width - 2 * across < MIN_KEPT * width or height - 2 * down < MIN_KEPT * height:
+        return None
+    return across, down, width - across, height - down
+
+
+def steadied(image: np.ndarray, homography: np.ndarray, box: tuple[int, int, int, int]
+             ) -> np.ndarray:
+    """`image` moved by `homography` (steadying) and cut to `box` (steady_box)."""
+    if not np.allclose(homography, np.eye(3)):  # the reference photo is not resampled
+        image = cv2.warpPerspective(image, homography, image.shape[1::-1], flags=cv2.INTER_LINEAR)
+    left, top, right, bottom = box
+    return np.ascontiguousarray(image[top:bottom, left:right])
 
 
 def shifts(database: Path, names: list[str]) -> list[np.ndarray]:

@@ -528,6 +528,7 @@ def _steady(sfm: SfmResult, work: Path, pixels: dict[str, np.ndarray], settings:
     moved = {name: still.steadied(image, moves[name], box) for name, image in pixels.items()}
     for name, image in moved.items():
         output.write_image(steady, name.rsplit(".", 1)[0], image)
+    settings = replace(settings, steady=False)
     if settings.intrinsics is not None:  # the principal point moves with the cut
         fx, fy, cx, cy = settings.intrinsics
         settings = replace(settings, intrinsics=(fx, fy, cx - box[0], cy - box[1]))

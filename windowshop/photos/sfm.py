@@ -102,6 +102,9 @@ class SfmSettings:
     # the phone's heading of each photo, in the order of the names (None where unknown), from
     # capture.json: "auto" then matches by heading (windowshop.photos.pairs.heading_pairs)
     headings: tuple[float | None, ...] | None = None
+    # photos of a phone that moved while the object turned in front of it are returned unmapped
+    # (SfmResult.held), for prepare to steady them; off for the photos so steadied
+    steady: bool = True
 
 
 @dataclass
@@ -127,8 +130,8 @@ class SfmResult:
     ring_method: dict[str, str] = field(default_factory=dict)  # guessed name -> how
     database: Path | None = None  # the features and verified pairs the model is checked against
     turned: frozenset[str] = frozenset()  # images turned a quarter (windowshop.photos.orient)
-    # taken by a phone held in the hand while the object turned (windowshop.photos.still): not
-    # mapped, as the backdrop's matches would hold every photo at one spot
+    # taken by a phone that moved while the object turned (windowshop.photos.still): not mapped,
+    # as the backdrop's matches would hold every photo at one spot
     held: bool = False
 
 
@@ -349,10 +352,10 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                       file=sys.stderr)
             with stages.stage("matching" + suffix, len(name_pairs)) as advance:
                 match(database, work, name_pairs, settings, wide, advance)
-            if i == 0 and still.hand_held(database):
-                # the object turned before a phone held in the hand: the room's matches would
-                # hold every photo at one spot whatever the attempt (25 such photos: 0 placed
-                # in 22 s, then 82 s of retries); prepare steadies them first
+            if i == 0 and settings.steady and still.hand_held(database):
+                # the object turned before a phone that moved: the room's matches would hold
+                # every photo at one spot whatever the attempt (25 such photos: 0 placed in
+                # 22 s, then 82 s of retries); prepare steadies them first
                 return SfmResult(reconstruction=None, placed=[], unplaced=sorted(names),
                                  keypoints=keypoints, matcher=matcher, pairs=len(name_pairs),
                                  database=database, turned=settings.turned, held=True)

@@ -18,17 +18,18 @@ Those pixels start GrabCut as probable background (windowshop.photos.segment): a
 object that matches the median all the same (the rim of a round mug keeps its place as it
 turns) is given back by its colour.
 
-A phone propped up moves a few pixels when its shutter is tapped. Its backdrop's matches then
-move past COLMAP's stationary 4 px, are kept, and hold every photo at one spot; so the pairs of
-a phone that stood still, but not at its very pixel, are verified again with STATIONARY_PX as
-the stationary bound (windowshop.photos.sfm.match).
-
-A phone held in the hand while the object turns moves further between shots (a hand's wobble of
-a degree or two is 10-30 px): its backdrop's matches are then neither stationary nor the
-object's, they hold every photo at about one spot, and the object is not found. `hand_held` tells
-such photos by their backdrop all the same (the median pair's raw matches mostly fit one
-homography that moves the photo by little, HELD_SHARE), so that the refusal asks for the phone
-to be propped up instead of for a walk round (windowshop.photos.prepare).
+A phone propped up moves a few pixels when its shutter is tapped, and one held in the hand
+while the object turns moves further (a hand's wobble of a degree or two is 10-30 px). Its
+backdrop's matches then move past COLMAP's stationary 4 px, are kept, hold every photo at about
+one spot, and the object is not found. `hand_held` tells such photos by their backdrop (the
+median pair's raw matches mostly fit one homography that moves the photo by little, HELD_SHARE,
+and they do not stay within STILL_PX), and `steadying` gives each photo the homography that
+moves it onto the photo most tied to the others. Prepare moves the photos so, cuts them to what
+all of them show (steady_box), and poses them again as a still phone's (windowshop.photos.
+prepare); what the homographies leave (a pixel or two) is taken as stationary by verifying the
+pairs again with STATIONARY_PX as the bound (windowshop.photos.sfm.match). Verifying the pairs so
+without moving the photos did for a shift of up to 3 px, not beyond: the room shifted by up to
+10 px, or turned by up to a degree, still held every photo at one spot.
 """
 
 from __future__ import annotations
@@ -137,11 +138,11 @@ def _wobbles(database: Path) -> list[float]:
 
 def hand_held(database: Path) -> bool:
     """Whether the photos matched in the COLMAP `database` keep their backdrop nearly in place,
-    as a phone held in the hand while the object turns does, without standing still
-    (fixed_camera): module docstring."""
+    as a phone held in the hand while the object turns does, without its staying at its very
+    pixel (a tripod's, fixed_camera within STILL_PX): module docstring."""
     shares = _wobbles(database)
     return (bool(shares) and float(np.median(shares)) > STILL_SHARE
-            and not fixed_camera(database))
+            and not fixed_camera(database, STILL_PX))
 
 
 def steadying(database: Path, names: list[str]) -> dict[str, np.ndarray] | None:

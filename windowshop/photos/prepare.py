@@ -470,8 +470,9 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
                            orient.for_sfm(photo.pixels) if turn else photo.pixels)
     pixels = {f"{p.name}.jpg": p.pixels for p in photos}  # by image file name, as taken
     sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
-    steady = _steady(sfm, work, pixels, settings) if sfm.held else None
-    if steady is not None:  # the steadied photos are what is posed, masked and delivered
+    steady = None
+    if sfm.steadying is not None:  # the steadied photos are what is posed, masked and delivered
+        steady = _steady(sfm.steadying, work, pixels, settings)
         work, pixels, settings = steady.work, steady.pixels, steady.settings
         image_dir = work / "images"
         sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
@@ -498,41 +499,36 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
 
 @dataclass
 class Steady:
-    """Photos of a phone held in the hand while the object turned, moved so that their backdrop
-    stays still (windowshop.photos.still.steadying) and cut to what all of them show."""
+    """Photos of a phone that moved while the object turned, moved so that their backdrop stays
+    still and cut to what all of them show (windowshop.photos.still.steadying)."""
 
     work: Path  # the scratch folder they are posed in, their images in images/
     pixels: dict[str, np.ndarray]  # by image file name
     settings: SfmSettings  # known intrinsics moved with the cut
-    moves: dict[str, np.ndarray]  # (3, 3) homography by image file name
-    box: tuple[int, int, int, int]  # left, top, right, bottom of the photos as taken
+    steadying: still.Steadying
 
     def as_report(self) -> dict:
-        return {"box": list(self.box),
+        return {"box": list(self.steadying.box),
                 "moves": {name.rsplit(".", 1)[0]: np.round(h, 6).tolist()
-                          for name, h in self.moves.items()}}
+                          for name, h in self.steadying.moves.items()}}
 
 
-def _steady(sfm: SfmResult, work: Path, pixels: dict[str, np.ndarray], settings: SfmSettings
-            ) -> Steady | None:
-    """The photos `pixels` (by image file name) steadied into `work`/steady, when structure from
-    motion found them held in the hand (`sfm.held`); None when they cannot be (photos turned a
-    quarter, a photo tied to none, a wobble too wide to cut)."""
-    moves = None if settings.turned else still.steadying(sfm.database, list(pixels))
-    sizes = {image.shape[1::-1] for image in pixels.values()}
-    box = None if moves is None or len(sizes) != 1 else still.steady_box(moves, sizes.pop())
-    if box is None:
-        return None
+def _steady(steadying: still.Steadying, work: Path, pixels: dict[str, np.ndarray],
+            settings: SfmSettings) -> Steady:
+    """The photos `pixels` (by image file name) moved and cut by `steadying` into
+    `work`/steady."""
     steady = work / "steady"
     (steady / "images").mkdir(parents=True)
-    moved = {name: still.steadied(image, moves[name], box) for name, image in pixels.items()}
+    moved = {name: still.steadied(image, steadying.moves[name], steadying.box)
+             for name, image in pixels.items()}
     for name, image in moved.items():
         output.write_image(steady, name.rsplit(".", 1)[0], image)
     settings = replace(settings, steady=False)
     if settings.intrinsics is not None:  # the principal point moves with the cut
         fx, fy, cx, cy = settings.intrinsics
-        settings = replace(settings, intrinsics=(fx, fy, cx - box[0], cy - box[1]))
-    return Steady(steady, moved, settings, moves, box)
+        left, top = steadying.box[:2]
+        settings = replace(settings, intrinsics=(fx, fy, cx - left, cy - top))
+    return Steady(steady, moved, settings, steadying)
 
 
 @contextlib.contextmanager
@@ -563,7 +559,8 @@ def _hand_held_blamed(work: Path):
         yield
     except UserError as err:
         database = attempt_database(work)
-        if type(err) is not UserError or not database.exists() or not still.hand_held(database):
+        if (type(err) is not UserError or not database.exists() or not still.hand_held(database)
+                or still.steadying(database) is None):
             raise
         raise UserError(f"{HAND_HELD} (what failed: {err})") from err
 

@@ -103,7 +103,7 @@ class SfmSettings:
     # capture.json: "auto" then matches by heading (windowshop.photos.pairs.heading_pairs)
     headings: tuple[float | None, ...] | None = None
     # photos of a phone that moved while the object turned in front of it are returned unmapped
-    # (SfmResult.held), for prepare to steady them; off for the photos so steadied
+    # (SfmResult.steadying), for prepare to steady them; off for the photos so steadied
     steady: bool = True
 
 
@@ -130,9 +130,9 @@ class SfmResult:
     ring_method: dict[str, str] = field(default_factory=dict)  # guessed name -> how
     database: Path | None = None  # the features and verified pairs the model is checked against
     turned: frozenset[str] = frozenset()  # images turned a quarter (windowshop.photos.orient)
-    # taken by a phone that moved while the object turned (windowshop.photos.still): not mapped,
-    # as the backdrop's matches would hold every photo at one spot
-    held: bool = False
+    # taken by a phone that moved while the object turned: how to steady them (windowshop.photos.
+    # still); they are not mapped, as the backdrop's matches would hold every photo at one spot
+    steadying: still.Steadying | None = None
 
 
 def quiet_logging(verbose: bool) -> None:
@@ -352,13 +352,15 @@ def reconstruct(image_dir: Path, names: list[str], work: Path, settings: SfmSett
                       file=sys.stderr)
             with stages.stage("matching" + suffix, len(name_pairs)) as advance:
                 match(database, work, name_pairs, settings, wide, advance)
-            if i == 0 and settings.steady and still.hand_held(database):
+            steadying = (still.steadying(database) if i == 0 and settings.steady
+                         and not settings.turned and still.hand_held(database) else None)
+            if steadying is not None:
                 # the object turned before a phone that moved: the room's matches would hold
                 # every photo at one spot whatever the attempt (25 such photos: 0 placed in
                 # 22 s, then 82 s of retries); prepare steadies them first
                 return SfmResult(reconstruction=None, placed=[], unplaced=sorted(names),
                                  keypoints=keypoints, matcher=matcher, pairs=len(name_pairs),
-                                 database=database, turned=settings.turned, held=True)
+                                 database=database, steadying=steadying)
         with stages.stage("placing cameras" + suffix, len(names)) as advance:
             # the relaxed mapper grows the first model rather than mapping all again (fruit's 78
             # photos: 7.0 s -> 1.2-2.9 s, the default having placed 45 of them)

@@ -34,6 +34,7 @@ without moving the photos did for a shift of up to 3 px, not beyond: the room sh
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -145,18 +146,34 @@ def hand_held(database: Path) -> bool:
             and not fixed_camera(database, STILL_PX))
 
 
-def steadying(database: Path, names: list[str]) -> dict[str, np.ndarray] | None:
-    """(3, 3) homography per image of `names` (the images matched in the COLMAP `database`)
-    moving its pixels onto those of the image most tied to the others, so that a hand-held
-    phone's backdrop stays still; None when some image is not tied. A pair is a tie when a
-    hand's wobble (_wobble) explains over STILL_SHARE of its raw matches, and each image joins
-    by the strongest tie it has to those already joined (a maximum spanning tree): a pair the
-    object fills is a weaker tie than one of the room."""
+@dataclass(frozen=True)
+class Steadying:
+    """How to steady a moving phone's photos (module docstring): the (3, 3) homography moving
+    each one's pixels (by image name) onto the reference photo's, and the part all of them show
+    once moved, (left, top, right, bottom) pixels (steady_box)."""
+
+    moves: dict[str, np.ndarray]
+    box: tuple[int, int, int, int]
+
+
+def steadying(database: Path) -> Steadying | None:
+    """How to steady the photos matched in the COLMAP `database` so that their backdrop stays
+    still, onto the photo most tied to the others; None when some photo is not tied, or when
+    the moves add up to more than a hand's wobble (steady_box: a walk's neighbouring frames are
+    each a wobble apart, but not all of them). A pair is a tie when a wobble (_wobble) explains
+    over STILL_SHARE of its raw matches, and each photo joins by the strongest tie it has to
+    those already joined (a maximum spanning tree): a pair the object fills is a weaker tie
+    than one of the room."""
+    with pycolmap.Database.open(database) as db:
+        names = [image.name for image in db.read_all_images()]
+        sizes = {(c.width, c.height) for c in db.read_all_cameras()}
     ties = {}
     for first, second, size, here, there in _raw_pairs(database):
         homography, share = _wobble(here, there, size)
-        if share > STILL_SHARE and first in names and second in names:
+        if share > STILL_SHARE:
             ties[first, second] = (share, homography)  # moves first's pixels onto second's
+    if not names or len(sizes) != 1:
+        return None
     strength = {n: sum(share for pair, (share, _) in ties.items() if n in pair) for n in names}
     onto = {max(names, key=strength.get): np.eye(3)}
     while len(onto) < len(names):
@@ -169,7 +186,8 @@ def steadying(database: Path, names: list[str]) -> dict[str, np.ndarray] | None:
             onto[second] = onto[first] @ np.linalg.inv(homography)
         else:
             onto[first] = onto[second] @ homography
-    return onto
+    box = steady_box(onto, sizes.pop())
+    return None if box is None else Steadying(onto, box)
 
 
 def steady_box(moves: dict[str, np.ndarray], size: tuple[int, int]

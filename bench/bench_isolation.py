@@ -1,12 +1,14 @@
 """Object isolation on real backgrounds: `windowshop prepare`'s masks against hand-made ones.
 
     python bench/bench_isolation.py [--views 16] [--max-side 640]
-                                    [--only skull|turntable|beer|fruit] [--keep DIR]
+                                    [--only skull|turntable|held|beer|fruit] [--keep DIR]
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. turntable: the same skull, its
 hand-made mask laid over one still photo of a room, a tiled floor and a paper towel in turn
 (scene.products.on_turntable: a phone that stood still while the object turned), scored alike.
+held: the same, each backdrop shifted by up to 20 px either way in each photo (a phone held in
+the hand), the hand-made masks moved and cut as prepare steadied the photos.
 beer_can (a can on a tiled floor, no hand masks; the frames of bench_prepare.py) and fruit (an
 apple and a banana on a white cloth): the masks' share of the image. Prints JSON; `--keep`
 leaves the scenes there.
@@ -26,6 +28,7 @@ import numpy as np
 from PIL import Image
 
 from windowshop.config import PrepareOptions
+from windowshop.photos import still
 from windowshop.photos.prepare import prepare
 from windowshop.scene import products
 from bench_prepare import beer_photos  # bench/ is on the path when run as a script
@@ -69,12 +72,19 @@ def summary(report: dict) -> dict:
             "seconds": report["total_seconds"], "stages": report["seconds"]}
 
 
-def skull_ious(masks: dict[Path, np.ndarray]) -> dict:
-    """mean_iou, worst_iou and each iou of `masks` (by dtu_skull photo) with the hand-made ones."""
+def skull_ious(masks: dict[Path, np.ndarray], steadied: dict | None = None) -> dict:
+    """mean_iou, worst_iou and each iou of `masks` (by dtu_skull photo, or a copy named alike)
+    with the hand-made ones; those moved and cut first as report.json's `steadied` says, by
+    photo name, when given."""
     scores = {}
     for photo, mask in masks.items():
-        truth = np.asarray(Image.open(DATA / "dtu_skull" / "masks" / f"{photo.stem}.png")
-                           .convert("L")) > 127
+        truth = Image.open(DATA / "dtu_skull" / "masks" / f"{photo.stem}.png").convert("L")
+        if steadied is not None:  # at the photo's size: the box is cut evenly from both sides
+            left, top, right, bottom = steadied["box"]
+            truth = Image.fromarray(still.steadied(
+                np.asarray(truth.resize((left + right, top + bottom))),
+                np.array(steadied["moves"][photo.stem]), steadied["box"]))
+        truth = np.asarray(truth) > 127
         resized = Image.fromarray(mask).resize(truth.shape[::-1], Image.NEAREST)
         scores[photo.stem] = round(iou(np.asarray(resized), truth), 3)
     values = list(scores.values()) or [0.0]
@@ -93,18 +103,31 @@ TURNTABLE_BACKDROPS = {"room": DATA / "kermit" / "kermit000.jpg",
                        "towel": DATA / "fruit" / "newfruit_small" / "IMG_3630.jpg"}
 
 
-def turntable(work: Path, views: int, options: PrepareOptions) -> dict:
-    """dtu_skull's skull turned in front of each still backdrop in TURNTABLE_BACKDROPS."""
+HELD_PX = 20  # held: the room shifted by up to this many pixels either way in each photo
+
+
+def turntable(work: Path, views: int, options: PrepareOptions, nudge_px: int = 0) -> dict:
+    """dtu_skull's skull turned in front of each still backdrop in TURNTABLE_BACKDROPS, each
+    shifted by up to `nudge_px` either way in each photo."""
     frames = products.dtu_frames(DATA / "dtu_skull")
     frames = [frames[i] for i in np.linspace(0, len(frames) - 1, min(views, len(frames)))
               .round().astype(int)]
     rows = {}
     for name, backdrop in TURNTABLE_BACKDROPS.items():
-        capture = products.on_turntable(frames, backdrop, work / f"turntable-{name}")
-        report, masks = run(capture / "images", work / f"turntable-{name}-scene", options)
-        rows[name] = {**summary(report), **skull_ious(masks)}
+        capture = products.on_turntable(frames, backdrop, work / f"turntable{nudge_px}-{name}",
+                                        nudge_px=nudge_px)
+        report, masks = run(capture / "images", work / f"turntable{nudge_px}-{name}-scene",
+                            options)
+        steadied = report.get("steadied")
+        rows[name] = {**summary(report), "steadied": steadied is not None,
+                      **skull_ious(masks, steadied)}
     return {"mean_iou": round(float(np.mean([r["mean_iou"] for r in rows.values()])), 3),
             "worst_iou": min(r["worst_iou"] for r in rows.values()), **rows}
+
+
+def held(work: Path, views: int, options: PrepareOptions) -> dict:
+    """turntable's, the phone held in the hand: each backdrop shifted by up to HELD_PX."""
+    return turntable(work, views, options, HELD_PX)
 
 
 def area(name: str, files: list[Path], work: Path, options: PrepareOptions) -> dict:
@@ -130,7 +153,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=16)
     parser.add_argument("--max-side", type=int, default=640)
-    parser.add_argument("--only", choices=["skull", "turntable", "beer", "fruit"], default=None)
+    parser.add_argument("--only", choices=["skull", "turntable", "held", "beer", "fruit"],
+                        default=None)
     parser.add_argument("--keep", default=None, help="write the scenes under this folder")
     args = parser.parse_args()
     options = PrepareOptions(max_side=args.max_side)
@@ -140,6 +164,7 @@ def main() -> None:
         work = Path(args.keep) if args.keep else Path(tmp)
         for key, name, bench in (("skull", "dtu_skull", skull),
                                  ("turntable", "turntable", turntable),
+                                 ("held", "held", held),
                                  ("beer", "beer_can", beer), ("fruit", "fruit", fruit)):
             if args.only in (None, key):
                 results[name] = bench(work, args.views, options)

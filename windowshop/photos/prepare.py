@@ -38,8 +38,7 @@ from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gath
 from windowshop.photos.located import Located
 from windowshop.photos.pairs import MATCHERS
 from windowshop.photos.progress import StageCallback, Stages
-from windowshop.photos.sfm import (MIN_KEYPOINTS, SfmResult, SfmSettings, attempt_database,
-                                   reconstruct)
+from windowshop.photos.sfm import MIN_KEYPOINTS, SfmResult, SfmSettings, reconstruct
 from windowshop.photos.verify.silhouettes import FIT_VIEWS
 from windowshop.rays import project
 from windowshop.scene import normalize
@@ -53,6 +52,7 @@ MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3, or FIT
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
           "matching": 0.2, "placing cameras": 0.25, "finding and checking the object": 0.05,
           "writing the scene": 0.1}
+STEADY = "steady"  # the scratch folder of steadied photos (prepare._steady)
 OUTPUTS = ("transforms.json", "report.json", "cameras.png", "images", "masks", "colmap")
 
 
@@ -516,8 +516,8 @@ class Steady:
 def _steady(steadying: still.Steadying, work: Path, pixels: dict[str, np.ndarray],
             settings: SfmSettings) -> Steady:
     """The photos `pixels` (by image file name) moved and cut by `steadying` into
-    `work`/steady."""
-    steady = work / "steady"
+    `work`/STEADY."""
+    steady = work / STEADY
     (steady / "images").mkdir(parents=True)
     moved = {name: still.steadied(image, steadying.moves[name], steadying.box)
              for name, image in pixels.items()}
@@ -552,15 +552,13 @@ HAND_HELD = ("the photos were taken from one spot, the phone held in the hand wh
 
 @contextlib.contextmanager
 def _hand_held_blamed(work: Path):
-    """A refusal that says the phone was held while the object turned (still.hand_held) when
-    the photos' matches in `work` show it, and steadying them did not help: what a walk's advice
-    would only mislead."""
+    """A refusal that says the phone was held while the object turned when its photos were
+    steadied (into `work`/STEADY) and that did not help: what a walk's advice would only
+    mislead."""
     try:
         yield
     except UserError as err:
-        database = attempt_database(work)
-        if (type(err) is not UserError or not database.exists() or not still.hand_held(database)
-                or still.steadying(database) is None):
+        if type(err) is not UserError or not (work / STEADY).is_dir():
             raise
         raise UserError(f"{HAND_HELD} (what failed: {err})") from err
 

@@ -114,3 +114,48 @@ def test_sift_starts_from_the_photos_own_size_only_where_they_are_rich_in_featur
     assert sfm.first_octave(tmp_path / "f.db", image_dir, fruit_names, sfm.SfmSettings()) == -1
     assert sfm.first_octave(tmp_path / "s.db", granite, names[:12], sfm.SfmSettings()) == -1  # a few photos
     assert not list(tmp_path.glob("*_octave.db"))  # the scratch database is gone
+
+
+def _extracted(database, image_dir, names):
+    for name in names:  # one call a photo: written in this order
+        pycolmap.extract_features(database, image_dir, image_names=[name],
+                                  camera_mode=pycolmap.CameraMode.PER_IMAGE,
+                                  device=pycolmap.Device.cpu)
+
+
+def _mapped(database, image_dir, names, out):
+    settings = sfm.SfmSettings()
+    sfm.match(database, out.parent, list(combinations(names, 2)), settings, False,
+              lambda n=1: None)
+    model = sfm.map_once(database, image_dir, out, settings, False, lambda n=1: None)
+    return {im.name: im.cam_from_world().matrix() for im in model.images.values() if im.has_pose}
+
+
+def test_images_are_numbered_in_the_order_given_whatever_order_their_features_came(tmp_path):
+    # features written last photo first, as extraction's threads may finish them: renumbered,
+    # every photo keeps its own features and camera, and the mapper builds the very model it
+    # builds from the photos written in order
+    image_dir, names = _images(tmp_path, sorted((DATA / "kermit").glob("*.jpg"))[:5], 320)
+    (tmp_path / "given").mkdir()
+    (tmp_path / "reversed").mkdir()
+    given, backwards = tmp_path / "given" / "database.db", tmp_path / "reversed" / "database.db"
+    _extracted(given, image_dir, names)
+    _extracted(backwards, image_dir, names[::-1])
+    with pycolmap.Database.open(backwards) as db:
+        before = {im.name: (im.camera_id, db.read_keypoints(im.image_id))
+                  for im in db.read_all_images()}
+        assert [im.name for im in db.read_all_images()] != names
+        sfm.in_given_order(db, names)
+    with pycolmap.Database.open(backwards) as db:
+        images = sorted(db.read_all_images(), key=lambda im: im.image_id)
+        assert [(im.image_id, im.name) for im in images] == list(enumerate(names, start=1))
+        for im in images:
+            assert im.camera_id == before[im.name][0]
+            assert np.array_equal(db.read_keypoints(im.image_id), before[im.name][1])
+            assert {(d.sensor_id.id, d.id) for d in db.read_frame(im.frame_id).data_ids} == {
+                (im.camera_id, im.image_id)}
+    expected = _mapped(given, image_dir, names, tmp_path / "given" / "sparse")
+    got = _mapped(backwards, image_dir, names, tmp_path / "reversed" / "sparse")
+    assert len(got) >= 4 and got.keys() == expected.keys()
+    for name, pose in got.items():
+        assert np.allclose(pose, expected[name], atol=1e-6), name

@@ -131,6 +131,31 @@ def test_a_held_phones_photos_are_moved_back_by_their_rooms_known_shift(tmp_path
         assert np.abs(moved - expected).max() < 1.5, (name, moved - expected)
 
 
+def _jerked(path: Path, dx: int) -> None:
+    """The photo at `path` moved `dx` px across, whole (the phone swung further for it)."""
+    image = np.asarray(Image.open(path).convert("RGB"))
+    moved = cv2.warpAffine(image, np.float32([[1, 0, dx], [0, 1, 0]]), image.shape[1::-1],
+                           borderMode=cv2.BORDER_REFLECT)
+    Image.fromarray(moved).save(path, quality=95)
+
+
+@needs_data
+def test_a_photo_the_phone_swung_too_far_for_is_left_out_of_the_steadying(tmp_path):
+    """One of 7 held photos moved 110 px more (14% of its width: past a wobble against any
+    other): the other six are still steadied onto one another, and that one is left out."""
+    products.on_turntable(products.dtu_frames(SKULL)[::8], ROOM, tmp_path / "held", nudge_px=20)
+    folder = tmp_path / "held" / "images"
+    names = sorted(p.name for p in folder.iterdir())
+    _jerked(folder / names[3], 110)
+    database = tmp_path / "held.db"
+    pycolmap.extract_features(database, folder, device=pycolmap.Device.cpu)
+    pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
+    steadying = still.steadying(database)
+    assert steadying is not None and set(steadying.moves) == set(names) - {names[3]}
+    left, top, right, bottom = steadying.box
+    assert 0 < left <= 40 and 0 < top <= 40  # cut by the others' shifts only
+
+
 def test_steadied_photos_keep_what_all_of_them_show_about_their_centre():
     image = np.random.default_rng(0).integers(0, 255, (80, 100, 3), dtype=np.uint8)
     def moving(dx, dy):

@@ -475,7 +475,7 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
         steady = _steady(sfm.steadying, work, pixels, settings)
         work, pixels, settings = steady.work, steady.pixels, steady.settings
         image_dir = work / "images"
-        sfm = reconstruct(image_dir, list(pixels), work, settings, stages)
+        sfm = steady.unplaced(reconstruct(image_dir, list(pixels), work, settings, stages))
     matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
     shown = {f"{p.name}.jpg": _shown(p) for p in photos}
     check_placed(sfm, len(photos), shown)
@@ -483,6 +483,8 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
         choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos),
                          _cutouts(photos), options, shown)
     sfm, found = choice.chosen.hypothesis.sfm, choice.chosen.hypothesis.found
+    if steady is not None:
+        sfm = steady.unplaced(sfm)
     with stages.stage("writing the scene", len(found.photos)) as advance:
         exposures = _exposures(sfm, pixels) if options.even_exposure else {}
         transforms = _write(out_dir, image_dir, pixels, sfm, found, source, exposures, advance)
@@ -506,9 +508,15 @@ class Steady:
     pixels: dict[str, np.ndarray]  # by image file name
     settings: SfmSettings  # known intrinsics moved with the cut
     steadying: still.Steadying
+    left_out: list[str]  # image file names steadying could not move onto the others
+
+    def unplaced(self, sfm: SfmResult) -> SfmResult:
+        """`sfm` of the steadied photos, with the photos left out among its unplaced."""
+        return replace(sfm, unplaced=sorted(set(sfm.unplaced) | set(self.left_out)))
 
     def as_report(self) -> dict:
         return {"box": list(self.steadying.box),
+                "left_out": [name.rsplit(".", 1)[0] for name in self.left_out],
                 "moves": {name.rsplit(".", 1)[0]: np.round(h, 6).tolist()
                           for name, h in self.steadying.moves.items()}}
 
@@ -520,7 +528,7 @@ def _steady(steadying: still.Steadying, work: Path, pixels: dict[str, np.ndarray
     steady = work / STEADY
     (steady / "images").mkdir(parents=True)
     moved = {name: still.steadied(image, steadying.moves[name], steadying.box)
-             for name, image in pixels.items()}
+             for name, image in pixels.items() if name in steadying.moves}
     for name, image in moved.items():
         output.write_image(steady, name.rsplit(".", 1)[0], image)
     settings = replace(settings, steady=False)
@@ -528,7 +536,7 @@ def _steady(steadying: still.Steadying, work: Path, pixels: dict[str, np.ndarray
         fx, fy, cx, cy = settings.intrinsics
         left, top = steadying.box[:2]
         settings = replace(settings, intrinsics=(fx, fy, cx - left, cy - top))
-    return Steady(steady, moved, settings, steadying)
+    return Steady(steady, moved, settings, steadying, sorted(set(pixels) - set(moved)))
 
 
 @contextlib.contextmanager

@@ -60,6 +60,9 @@ def summary_lines(report: dict) -> list[str]:
         lines.append(f"  the phone moved a little between photos (held in the hand): each photo "
                      f"was moved to keep the room still, and cut by {left} px at each side and "
                      f"{top} px at the top and bottom")
+        if left_out := report["steadied"].get("left_out"):
+            lines.append(f"  {len(left_out)} photo(s) could not be steadied, the phone having "
+                         f"moved too far for them: left unplaced")
     if report.get("priors", {}).get("capture"):
         lines.append(f"  {report['priors']['summary']}")
     return lines + _verification_lines(report.get("verification"))

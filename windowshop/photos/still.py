@@ -154,8 +154,9 @@ def hand_held(database: Path) -> bool:
 @dataclass(frozen=True)
 class Steadying:
     """How to steady a moving phone's photos (module docstring): the (3, 3) homography moving
-    each one's pixels (by image name) onto the reference photo's, and the part all of them show
-    once moved, (left, top, right, bottom) pixels (steady_box)."""
+    each one's pixels (by image name; a photo tied to no other has none) onto the reference
+    photo's, and the part all of them show once moved, (left, top, right, bottom) pixels
+    (steady_box)."""
 
     moves: dict[str, np.ndarray]
     box: tuple[int, int, int, int]
@@ -163,12 +164,14 @@ class Steadying:
 
 def steadying(database: Path) -> Steadying | None:
     """How to steady the photos matched in the COLMAP `database` so that their backdrop stays
-    still, onto the photo most tied to the others; None when some photo is not tied, or when
-    the moves add up to more than a hand's wobble (steady_box: a walk's neighbouring frames are
-    each a wobble apart, but not all of them). A pair is a tie when a wobble (_wobble) explains
-    over STILL_SHARE of its raw matches, and each photo joins by the strongest tie it has to
-    those already joined (a maximum spanning tree): a pair the object fills is a weaker tie
-    than one of the room."""
+    still, onto the photo most tied to the others; None when the photos tied to it are not most
+    of them, or when the moves add up to more than a hand's wobble (steady_box: a walk's
+    neighbouring frames are each a wobble apart, but not all of them). A pair is a tie when a
+    wobble (_wobble) explains over STILL_SHARE of its raw matches, and each photo joins by the
+    strongest tie it has to those already joined (a maximum spanning tree): a pair the object
+    fills is a weaker tie than one of the room. A photo tied to none (the phone swung further
+    for it, or it is blurred) is left out of `moves`, and unplaced: left as it is, its room's
+    matches would hold it at the others' spot."""
     with pycolmap.Database.open(database) as db:
         names = [image.name for image in db.read_all_images()]
         sizes = {(c.width, c.height) for c in db.read_all_cameras()}
@@ -181,16 +184,15 @@ def steadying(database: Path) -> Steadying | None:
         return None
     strength = {n: sum(share for pair, (share, _) in ties.items() if n in pair) for n in names}
     onto = {max(names, key=strength.get): np.eye(3)}
-    while len(onto) < len(names):
-        joining = [pair for pair in ties if (pair[0] in onto) != (pair[1] in onto)]
-        if not joining:
-            return None
+    while joining := [pair for pair in ties if (pair[0] in onto) != (pair[1] in onto)]:
         first, second = max(joining, key=lambda pair: ties[pair][0])
         homography = ties[first, second][1]
         if first in onto:
             onto[second] = onto[first] @ np.linalg.inv(homography)
         else:
             onto[first] = onto[second] @ homography
+    if 2 * len(onto) <= len(names):
+        return None
     box = steady_box(onto, sizes.pop())
     return None if box is None else Steadying(onto, box)
 

@@ -196,13 +196,18 @@ def test_a_turntable_shot_with_the_phone_in_hand_is_steadied_and_delivered(tmp_p
     """The room moved by up to 20 px in each of 13 photos: its matches are neither the object's
     nor stationary, held every photo at one spot, and the capture was refused. Each photo is
     now moved so that the room stays still, cut to what all show, and posed and masked as a
-    propped phone's photos are."""
+    propped phone's photos are. One photo the phone swung 110 px further for (past a wobble
+    from any other) is left out and named, with what to do, where before it kept the others
+    from being steadied and the capture was refused ("no object found")."""
     frames = products.dtu_frames(SKULL)[::4]
     products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=20)
+    _jerked(tmp_path / "capture" / "images" / "024.jpg", 110)
     result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
                      show=False)
     steadied = result.report["steadied"]
     assert steadied is not None and result.report["masks"] == "still"
+    assert steadied["left_out"] == ["024"] and "024.jpg" in result.report["unplaced"]
+    assert result.report["reshoot"]["024.jpg"].startswith("the phone moved too far for it")
     assert any("held in the hand" in line for line in summary_lines(result.report))
     left, top, right, bottom = steadied["box"]
     assert 0 < left <= 40 and 0 < top <= 40  # cut by the room's widest shift, at most 2 x 20

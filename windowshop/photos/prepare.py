@@ -493,6 +493,8 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
                             for name, e in exposures.items()}
     summary["verification"] = _verification(choice, options.force)
     summary["steadied"] = None if steady is None else steady.as_report()
+    if steady is not None:  # their room moved too far, not their view of the object too little
+        summary["reshoot"] |= {shown[name]: report.SWUNG for name in steady.left_out}
     summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
                                          found.plane is not None,
                                          matcher)

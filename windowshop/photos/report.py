@@ -60,9 +60,6 @@ def summary_lines(report: dict) -> list[str]:
         lines.append(f"  the phone moved a little between photos (held in the hand): each photo "
                      f"was moved to keep the room still, and cut by {left} px at each side and "
                      f"{top} px at the top and bottom")
-        if left_out := report["steadied"].get("left_out"):
-            lines.append(f"  {len(left_out)} photo(s) could not be steadied, the phone having "
-                         f"moved too far for them: left unplaced")
     if report.get("priors", {}).get("capture"):
         lines.append(f"  {report['priors']['summary']}")
     return lines + _verification_lines(report.get("verification"))
@@ -78,6 +75,11 @@ def _verification_lines(verification: dict | None) -> list[str]:
         return [f"  checked: kept {chosen['label']} (tried {len(verification['tried'])} ways)"]
     return ["  UNVERIFIED (delivered by --force): "
             + "; ".join(c["detail"] for c in chosen["checks"] if not c["passed"])]
+
+
+# what to reshoot for a held phone's photo that steadying left out (windowshop.photos.still)
+SWUNG = ("the phone moved too far for it while the others kept the room still: retake it "
+         "holding the phone where it was for the others")
 
 
 def reshoot(shown: list[str], unplaced: list[str]) -> dict[str, str]:

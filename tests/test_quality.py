@@ -53,6 +53,17 @@ def test_a_still_phone_is_told_to_turn_the_object_not_to_walk():
                     "to the phone"]
 
 
+def test_a_held_phones_photo_left_unsteadied_is_told_apart_from_one_that_shared_too_little():
+    tips = advice({"unplaced": ["IMG_7.jpg", "IMG_9.jpg"], "swung": ["IMG_9.jpg"],
+                   "empty_arcs": [], "placed": 30, "elevations": [10, 35], "masks": "still",
+                   "held_out_psnr": 28.0})
+    assert tips == ["photo IMG_7.jpg could not be placed: retake so each photo shares most of its "
+                    "view with the photo before it (turn the object in smaller steps)",
+                    "photo IMG_9.jpg could not be placed: the phone moved too far for it while "
+                    "the others kept the room still: retake holding the phone where it was for "
+                    "the others"]
+
+
 def test_report_of_a_one_sided_capture(tmp_path):
     cams = ring(np.linspace(0, 140, 8))
     views = [View(c, np.zeros((64, 64, 3), np.float32), "train", f"v{i}") for i, c in enumerate(cams)]
@@ -133,3 +144,18 @@ def test_report_doubts_the_photos_the_chosen_hypothesis_and_the_held_out_check_b
     report = quality_report(scene, metrics, {"covered_span_degrees": 324.0}, prepared)
     assert report["trust"]["doubtful"] == {"v3.jpg": "silhouettes", "v9.jpg": "held-out"}
     assert report["trust"]["level"] == "part" and report["trust"]["checked"]
+
+
+def test_report_tells_which_unplaced_photos_steadying_left_out(tmp_path):
+    from windowshop.photos.report import SWUNG, reshoot
+
+    views = [View(c, np.zeros((64, 64, 3), np.float32), "train", f"v{i}.jpg")
+             for i, c in enumerate(ring(np.arange(0, 360, 36.0)))]
+    scene = Scene(views=views, format="hand", source=tmp_path,
+                  aabb=np.array([[-1.0] * 3, [1.0] * 3]), near=1, far=5)
+    shown = [f"v{i}.jpg" for i in range(12)]
+    prepared = {"used": 12, "placed": 10, "unplaced": ["v10.jpg", "v11.jpg"],
+                "reshoot": reshoot(shown, ["v10.jpg", "v11.jpg"]) | {"v11.jpg": SWUNG}}
+    report = quality_report(scene, {"psnr": 25.0, "test_views": 1}, {}, prepared)
+    assert report["swung"] == ["v11.jpg"]
+    assert sum("moved too far" in tip for tip in advice(report)) == 1

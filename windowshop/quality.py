@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from windowshop.photos.report import SWUNG
 from windowshop.scene.types import Camera, Scene
 from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, gaps_between, unbroken_arc
 
@@ -47,10 +48,16 @@ def advice(report: dict) -> list[str]:
     """Concrete things to do better, from a quality report's facts (most important first)."""
     tips = []
     turned = report.get("masks") == "still"  # the phone stood still, the object turned
-    if report.get("unplaced"):
-        tips.append(f"{_names(report['unplaced'])} could not be placed: retake so each photo shares "
+    swung = report.get("swung", [])
+    unplaced = [name for name in report.get("unplaced", []) if name not in swung]
+    if unplaced:
+        tips.append(f"{_names(unplaced)} could not be placed: retake so each photo shares "
                     "most of its view with the photo before it"
                     + (" (turn the object in smaller steps)" if turned else ""))
+    if swung:
+        tips.append(f"{_names(swung)} could not be placed: the phone moved too far for "
+                    f"{'it' if len(swung) == 1 else 'them'} while the others kept the room still: "
+                    "retake holding the phone where it was for the others")
     blurred = [name for name, why in report.get("dropped", {}).items() if "blur" in why]
     if blurred:
         tips.append(f"{_names(blurred)} {'is' if len(blurred) == 1 else 'are'} blurred: hold the "
@@ -105,6 +112,8 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "photos": (prepared or {}).get("used", len(scene.views)),
         "placed": (prepared or {}).get("placed", len(scene.views)),
         "unplaced": (prepared or {}).get("unplaced", []),
+        "swung": [name for name, why in (prepared or {}).get("reshoot", {}).items()
+                  if why == SWUNG],  # held phone's photos steadying left out
         "dropped": (prepared or {}).get("dropped", {}),
         "dark": (prepared or {}).get("dark", []),
         "cropped": (prepared or {}).get("cropped", []),

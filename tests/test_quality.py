@@ -155,7 +155,8 @@ def test_report_tells_which_unplaced_photos_steadying_left_out(tmp_path):
                   aabb=np.array([[-1.0] * 3, [1.0] * 3]), near=1, far=5)
     shown = [f"v{i}.jpg" for i in range(12)]
     prepared = {"used": 12, "placed": 10, "unplaced": ["v10.jpg", "v11.jpg"],
-                "reshoot": reshoot(shown, ["v10.jpg", "v11.jpg"]) | {"v11.jpg": SWUNG}}
+                "reshoot": reshoot(shown, ["v10.jpg", "v11.jpg"]) | {"v11.jpg": SWUNG},
+                "steadied": {"box": [4, 3, 60, 61], "left_out": ["v11"], "moves": {}}}
     report = quality_report(scene, {"psnr": 25.0, "test_views": 1}, {}, prepared)
     assert report["swung"] == ["v11.jpg"]
     assert sum("moved too far" in tip for tip in advice(report)) == 1

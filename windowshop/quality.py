@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from windowshop.photos.report import SWUNG
 from windowshop.scene.types import Camera, Scene
 from windowshop.video.coverage import FULL_TURN_SPAN, azimuths_about, gaps_between, unbroken_arc
 
@@ -98,6 +97,13 @@ def _names(names: list[str]) -> str:
     return f"photo {names[0]}" if len(names) == 1 else f"photos {head} and {names[-1]}"
 
 
+def _swung(prepared: dict) -> list[str]:
+    """The unplaced photos of prepare's report that steadying left out (a held phone that moved
+    too far for them; `steadied` names them by stem)."""
+    left_out = set((prepared.get("steadied") or {}).get("left_out", []))
+    return [name for name in prepared.get("unplaced", []) if Path(name).stem in left_out]
+
+
 def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | None,
                    held_out: dict | None = None) -> dict:
     """The report of a capture: `prepared` is prepare's report.json (None for a posed scene),
@@ -112,8 +118,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "photos": (prepared or {}).get("used", len(scene.views)),
         "placed": (prepared or {}).get("placed", len(scene.views)),
         "unplaced": (prepared or {}).get("unplaced", []),
-        "swung": [name for name, why in (prepared or {}).get("reshoot", {}).items()
-                  if why == SWUNG],  # held phone's photos steadying left out
+        "swung": _swung(prepared or {}),
         "dropped": (prepared or {}).get("dropped", {}),
         "dark": (prepared or {}).get("dark", []),
         "cropped": (prepared or {}).get("cropped", []),

@@ -25,8 +25,10 @@ from shared_data import DATA
 
 SKULL = DATA / "dtu_skull"
 ROOM = DATA / "kermit" / "kermit000.jpg"
-needs_data = pytest.mark.skipif(not (SKULL / "cameras_sphere.npz").is_file() or not ROOM.is_file(),
-                                reason="needs dtu_skull and kermit")
+TILES = DATA / "beer_can" / "images" / "0030.jpg"
+needs_data = pytest.mark.skipif(
+    not (SKULL / "cameras_sphere.npz").is_file() or not ROOM.is_file() or not TILES.is_file(),
+    reason="needs dtu_skull, kermit and beer_can")
 
 
 def _turning_over_texture(count: int, rng: np.random.Generator, nudge: int = 0):
@@ -56,17 +58,51 @@ def _turning_over_texture(count: int, rng: np.random.Generator, nudge: int = 0):
 @pytest.mark.parametrize("nudge", [0, 3])
 def test_the_backdrop_is_what_stays_put_whatever_each_photos_exposure(nudge):
     photos, objects, moved = _turning_over_texture(8, np.random.default_rng(0), nudge)
-    shown = still.backdrop(photos, moved)
-    assert shown is not None and len(shown) == len(photos)
+    shown, stands = still.backdrop(photos, moved)
+    assert len(shown) == len(stands) == len(photos)
     # where most photos show the backdrop, the median is the backdrop's (but at the edges a
     # nudged photo shows what the others do not)
     margin = np.zeros((120, 160), bool)
     margin[2 * nudge:120 - 2 * nudge, 2 * nudge:160 - 2 * nudge] = True
     mostly_behind = (np.mean(objects, axis=0) < 0.5) & margin
-    for backdrop, inside in zip(shown, objects):
-        assert backdrop.shape == inside.shape
+    for backdrop, out, inside in zip(shown, stands, objects):
+        assert backdrop.shape == out.shape == inside.shape
         assert backdrop[~inside & mostly_behind].mean() >= 0.95  # however bright the photo
         assert backdrop[inside].mean() <= 0.05  # the object is not taken for it
+        assert out[~inside].mean() <= 0.01  # nor does the backdrop stand out from itself
+
+
+def _dark_object_and_its_shadow(count: int, rng: np.random.Generator):
+    """`count` photos (120, 160, 3) uint8 of a black object (a disk that moves about as it
+    turns, as a dark side does) over a dim textured backdrop, the backdrop beside it darkened
+    to half (the shadow it casts, keeping the backdrop's colour), and the object's and the
+    shadow's (120, 160) bool per photo."""
+    backdrop = rng.uniform(60, 160, (120, 160, 3))
+    rows, cols = np.mgrid[:120, :160]
+    photos, objects, shadows = [], [], []
+    for k in range(count):
+        centre = 40 + 80 * k / (count - 1)
+        inside = np.hypot(rows - 60, cols - centre) < 18
+        shadow = (np.abs(rows - 90) < 6) & (np.abs(cols - centre - 25) < 15)
+        pixels = np.where(inside[..., None], 4.0, backdrop * np.where(shadow, 0.5, 1.0)[..., None])
+        photos.append(np.clip(pixels + rng.normal(0, 1, pixels.shape), 0, 255).astype(np.uint8))
+        objects.append(inside)
+        shadows.append(shadow)
+    return photos, objects, shadows
+
+
+def test_a_dark_side_stands_out_from_a_still_backdrop_and_a_shadow_does_not(monkeypatch):
+    """Colour alone cannot tell a black side from a dim room (GrabCut gave the skull's dark
+    side to kermit's room: masks IoU 0.47 at worst); a still backdrop can, where most photos
+    agree on it. A shadow is the backdrop darker, its colour kept: not the object."""
+    photos, objects, shadows = _dark_object_and_its_shadow(9, np.random.default_rng(2))
+    _, stands = still.backdrop(photos)
+    for out, inside, shadow in zip(stands, objects, shadows):
+        assert out[inside].mean() >= 0.9
+        assert out[~inside].mean() <= 0.01 and not out[shadow].any()
+    monkeypatch.setattr(still, "SHADOW", 1.0)  # every darkening taken for the object
+    _, stands = still.backdrop(photos)
+    assert np.mean([out[shadow].mean() for out, shadow in zip(stands, shadows)]) >= 0.9
 
 
 def test_no_backdrop_from_photos_of_two_sizes_or_too_few():
@@ -226,6 +262,25 @@ def test_a_turntable_shot_with_the_phone_in_hand_is_steadied_and_delivered(tmp_p
 
 
 @needs_data
+def test_a_held_phones_photos_are_cut_from_their_steadied_backdrop_however_few_its_matches(
+        tmp_path):
+    """The skull over beer_can's tiles, 16 photos, the floor shifted by up to 20 px in each:
+    once steadied, the floor stands still, but its few matches are outnumbered by the skull's,
+    so the matches alone did not say the phone stood still, and the masks were cut without the
+    backdrop (IoU 0.736 on average, 0.322 at worst; 0.824 and 0.622 with it)."""
+    frames = products.dtu_frames(SKULL)
+    frames = [frames[i] for i in np.linspace(0, len(frames) - 1, 16).round().astype(int)]
+    products.on_turntable(frames, TILES, tmp_path / "capture", nudge_px=20)
+    result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
+                     show=False)
+    steadied = result.report["steadied"]
+    assert steadied is not None and result.report["masks"] == "still"
+    ious = _scene_ious(tmp_path / "scene", frames, steadied)
+    assert len(ious) >= len(frames) - 2
+    assert np.mean(ious) >= 0.78 and min(ious) >= 0.5, ious
+
+
+@needs_data
 def test_a_held_phones_turntable_that_steadying_cannot_save_is_refused_with_what_to_do(tmp_path):
     """5 photos 10 frames apart, the phone held: steadied, 3 are placed; the refusal asks for
     the phone to be propped up and the object turned in smaller steps, not only for a walk
@@ -248,7 +303,9 @@ def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path, nudge):
     with it). With the room shifted by up to 3 px in each photo (a propped phone nudged by the
     tap on its shutter), COLMAP's stationary filter (4 px) kept the room's matches and only 2
     photos were placed; verified again past the nudge, and each photo moved back by its
-    backdrop's matches, 0.97 and 0.95."""
+    backdrop's matches, 0.97 and 0.95. Since what stands out from the backdrop is held as the
+    skull's (test below), 0.93 and 0.79 unmoved, 0.92 and 0.76 nudged: a few dark parts of the
+    room beside the skull go with its dark side."""
     frames = products.dtu_frames(SKULL)[::4]
     products.on_turntable(frames, ROOM, tmp_path / "capture", nudge_px=nudge)
     result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
@@ -258,7 +315,24 @@ def test_a_turntable_capture_is_cut_from_its_still_backdrop(tmp_path, nudge):
     assert (steadied is None) == (nudge == 0)  # a nudged phone's photos are steadied too
     ious = _scene_ious(tmp_path / "scene", frames, steadied)
     assert len(ious) >= len(frames) - 2
-    assert np.mean(ious) >= 0.9 and min(ious) >= 0.75, ious
+    assert np.mean(ious) >= 0.9 and min(ious) >= 0.7, ious
+
+
+@needs_data
+def test_a_turntables_dark_side_is_told_from_a_dim_room_by_the_still_backdrop(tmp_path):
+    """16 photos spread over dtu_skull's, the skull over the room: its dark side is as dark as
+    the room's shadows, so GrabCut gave it to the room (masks IoU 0.793 on average, 0.465 at
+    worst). Where most photos show the room, the skull stands out from it, and is kept whatever
+    its colour: 0.869 and 0.819."""
+    frames = products.dtu_frames(SKULL)
+    frames = [frames[i] for i in np.linspace(0, len(frames) - 1, 16).round().astype(int)]
+    products.on_turntable(frames, ROOM, tmp_path / "capture")
+    result = prepare(tmp_path / "capture" / "images", tmp_path / "scene", PrepareOptions(),
+                     show=False)
+    assert result.report["masks"] == "still"
+    ious = _scene_ious(tmp_path / "scene", frames)
+    assert len(ious) >= len(frames) - 2
+    assert np.mean(ious) >= 0.84 and min(ious) >= 0.7, ious
 
 
 @pytest.mark.skipif(not (DATA / "beer_can" / "Beer.mp4").is_file(), reason="needs beer_can")

@@ -3,7 +3,8 @@ sparse points and its box, then made consistent across views through their visua
 
     inside the box above the support plane ──> may be the object; outside it ──> is not
     object keypoints ──> sure object; other keypoints (the surface, the room) ──> sure background
-    a still backdrop (the phone did not move; windowshop.photos.still) ──> probable background
+    a still backdrop (the phone did not move; windowshop.photos.still) ──> probable background,
+        and what stands out from it ──> sure object
     GrabCut per photo ──> visual hull of the masks (forgiving a few bad ones) ──> GrabCut again
     within each photo's view of the hull (its background model now learns the colours right
     around the object) ──> cut to the hull of the results (segment.consistent): a pixel stays
@@ -52,8 +53,10 @@ class View:
     camera: Camera
     object_uv: np.ndarray  # (K, 2) the object's points seen in this photo
     background_uv: np.ndarray  # (B, 2) points off the object: the support surface, the room
-    # (H, W) bool: a still backdrop, the same in every photo (windowshop.photos.still), or None
+    # (H, W) bool: a still backdrop, the same in every photo (windowshop.photos.still), and
+    # what stands out from it, or None
     backdrop: np.ndarray | None = None
+    stands_out: np.ndarray | None = None
 
 
 def _disks(shape: tuple[int, int], uv: np.ndarray, radius: int) -> np.ndarray:
@@ -87,12 +90,15 @@ def box_outline(aabb: np.ndarray, camera: Camera, grow: float = MARGIN) -> np.nd
 
 def _seed_points(seeds: np.ndarray, view: View, inside: np.ndarray) -> np.ndarray:
     """`seeds` (H, W) with sure labels at the view's keypoints: background ones everywhere, the
-    object's where `inside` (H, W) bool allows; a still backdrop starts as probable background."""
+    object's where `inside` (H, W) bool allows, as are the pixels standing out from a still
+    backdrop, which itself starts as probable background."""
     if view.backdrop is not None:
         seeds[view.backdrop & (seeds == cv2.GC_PR_FGD)] = cv2.GC_PR_BGD
     radius = max(1, round(SEED_RADIUS * np.hypot(*seeds.shape)))
     seeds[_disks(seeds.shape, view.background_uv, radius)] = cv2.GC_BGD
     seeds[_disks(seeds.shape, view.object_uv, radius) & inside] = cv2.GC_FGD
+    if view.stands_out is not None:
+        seeds[view.stands_out & inside] = cv2.GC_FGD
     return seeds
 
 

@@ -16,7 +16,11 @@ move of the backdrop's matches, and their exposures evened) and that has texture
 object moves its texture, while a plain part of it can match the median as a plain wall does.
 Those pixels start GrabCut as probable background (windowshop.photos.segment): a part of the
 object that matches the median all the same (the rim of a round mug keeps its place as it
-turns) is given back by its colour.
+turns) is given back by its colour. The other way round, where most photos agree with the median
+(so that it is the backdrop there), a photo that stands out from it shows the object, however
+alike their colours: a dark side against a dim room, which GrabCut's colours gave to the room.
+Those pixels start GrabCut as sure object, but for a shadow (the backdrop darker, its colour
+kept).
 
 A phone propped up moves a few pixels when its shutter is tapped, and one held in the hand
 while the object turns moves further (a hand's wobble of a degree or two is 10-30 px). Its
@@ -94,7 +98,7 @@ SHADOW = 0.3
 # ... and only where this square (working pixels) fits inside what stands out: a few pixels of
 # the room that stand out by chance grew, as sure object, into whole parts of it (kermit's
 # room, 13 photos: masks IoU 0.948 -> 0.928 with a 3-pixel square). With 5 the share above is
-# 99.75-99.93%, and no photo set's masks score under what they did without the backdrop's help
+# 99.75-99.93%, and no photo set's masks score under what they did before
 STANDS_OPEN = 5
 MIN_PHOTOS = 5  # fewer photos give no median to trust
 MIN_KEPT = 0.8  # steadied photos that keep less of their width or height than this: not steadied

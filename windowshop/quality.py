@@ -48,7 +48,14 @@ def advice(report: dict) -> list[str]:
     tips = []
     turned = report.get("masks") == "still"  # the phone stood still, the object turned
     swung = report.get("swung", [])
-    unplaced = [name for name in report.get("unplaced", []) if name not in swung]
+    apart = [name for name in report.get("apart", {}) if name not in swung]
+    unplaced = [name for name in report.get("unplaced", []) if name not in swung + apart]
+    if apart:
+        one = len(apart) == 1
+        tips.append(f"{_names(apart)} share{'s' if one else ''} no details with the placed "
+                    f"photos: leave {'it' if one else 'them'} out if {'it shows' if one else 'they show'} "
+                    f"something else; if {'it shows' if one else 'they show'} the object, add photos "
+                    f"between {'it' if one else 'them'} and the others")
     if unplaced:
         tips.append(f"{_names(unplaced)} could not be placed: retake so each photo shares "
                     "most of its view with the photo before it"
@@ -119,6 +126,7 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "placed": (prepared or {}).get("placed", len(scene.views)),
         "unplaced": (prepared or {}).get("unplaced", []),
         "swung": _swung(prepared or {}),
+        "apart": (prepared or {}).get("apart", {}),
         "dropped": (prepared or {}).get("dropped", {}),
         "dark": (prepared or {}).get("dark", []),
         "cropped": (prepared or {}).get("cropped", []),

@@ -15,6 +15,15 @@ def test_reshoot_names_the_placed_neighbours_in_order():
     assert "between" not in reshoot(["a.jpg"], ["a.jpg"])["a.jpg"]
 
 
+def test_reshoot_tells_photos_that_match_no_placed_one_what_they_may_be():
+    shown = ["a.jpg", "b.jpg", "c.jpg", "x.jpg", "y.jpg", "z.jpg"]
+    advice = reshoot(shown, ["b.jpg", "x.jpg", "y.jpg", "z.jpg"],
+                     {"x.jpg": ["y.jpg"], "y.jpg": ["x.jpg"], "z.jpg": []})
+    assert "between it and a.jpg and c.jpg" in advice["b.jpg"]  # linked to the placed: as before
+    assert advice["x.jpg"].startswith("it matches only y.jpg, none of the placed photos")
+    assert "something else" in advice["z.jpg"] and "no details with any other photo" in advice["z.jpg"]
+
+
 def test_summary_lists_the_advice():
     report = {"placed": 7, "used": 8, "reprojection_error_px": 0.5, "dropped": {},
               "unplaced": ["c.jpg"], "reshoot": {"c.jpg": "retake it"}, "masks": "none"}

@@ -71,6 +71,27 @@ def test_photos_that_cannot_be_placed(tmp_path):
     assert "could only place 0 of 5 photos" in str(err) and "data_kermit000.png" in str(err)
 
 
+def test_photos_of_something_else_among_the_photos_are_named_as_such(tmp_path):
+    """Kermit's 11 photos with three of the skull's among them (a seller's photos of another
+    listing): the object is delivered, and the skull's photos are named as sharing nothing with
+    it, not sent to be retaken between kermit's."""
+    from windowshop.quality import advice
+
+    photos = _kermit(tmp_path / "photos", 11)
+    for stem in ("000", "001", "030"):  # two neighbours that match each other, one alone
+        shutil.copyfile(DATA / "dtu_skull" / "images" / f"{stem}.jpg", photos / f"skull{stem}.jpg")
+    result = prepare(photos, tmp_path / "out", PrepareOptions(max_side=320), show=False)
+    found = result.report
+    assert found["placed"] >= 8 and not any(v["name"].startswith("skull") for v in found["views"])
+    assert found["apart"] == {"skull000.jpg": ["skull001.jpg"], "skull001.jpg": ["skull000.jpg"],
+                              "skull030.jpg": []}
+    assert found["reshoot"]["skull000.jpg"].startswith("it matches only skull001.jpg, none of the")
+    assert found["reshoot"]["skull030.jpg"].startswith("it shares no details with any other photo")
+    tips = advice(found)
+    assert tips[0].startswith("photos skull000.jpg, skull001.jpg and skull030.jpg share no details")
+    assert not any("skull" in tip for tip in tips[1:])  # not also told to retake them in steps
+
+
 def test_too_little_texture(tmp_path):
     """A smooth grey object on a smooth background: no features to match."""
     photos = tmp_path / "photos"

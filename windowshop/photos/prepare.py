@@ -384,12 +384,13 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
 
     unplaced = [shown(n) for n in sfm.unplaced]
     ring = {shown(n): report.RING_NOTES[how] for n, how in sorted(sfm.ring_method.items())}
+    apart = {shown(n): [shown(m) for m in matches] for n, matches in _apart(sfm).items()}
     return {
         "input": str(source), "kind": inputs.kind, "ignored": inputs.ignored,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
         "dark": dark, "cropped": _cropped(photos),
-        "unplaced": unplaced, "estimated_from_ring": ring,
-        "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring)),
+        "unplaced": unplaced, "estimated_from_ring": ring, "apart": apart,
+        "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring), apart),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
@@ -402,6 +403,20 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "views": [{"name": p.name, "photo": str(by_name[p.name].source)} for p in found.photos],
         "seconds": {k: round(v, 3) for k, v in stages.seconds.items()},
     }
+
+
+def _apart(sfm: SfmResult) -> dict[str, list[str]]:
+    """The unplaced photos (image file names) that share no verified pair with any placed photo,
+    each with the photos it does match: three photos of another object among the skull's
+    matched only each other, and were told to add photos between them and the skull's."""
+    if sfm.database is None:
+        return {}
+    linked = {name: set() for name in sfm.unplaced}
+    for _, _, one, other in hypotheses.strongest_pairs(sfm.database):
+        linked.setdefault(one, set()).add(other)
+        linked.setdefault(other, set()).add(one)
+    placed = set(sfm.placed) | set(sfm.guessed)
+    return {name: sorted(linked[name]) for name in sfm.unplaced if not linked[name] & placed}
 
 
 def _choose(sfm: SfmResult, pixels: dict[str, np.ndarray], work: Path, settings: SfmSettings,
@@ -501,6 +516,8 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
     summary["steadied"] = None if steady is None else steady.as_report()
     if steady is not None:  # their room moved too far, not their view of the object too little
         summary["reshoot"] |= {shown[name]: report.SWUNG for name in steady.left_out}
+        summary["apart"] = {name: matches for name, matches in summary["apart"].items()
+                            if name not in {shown[n] for n in steady.left_out}}
     summary["priors"] = sensors.describe(priors, [p.name for p in photos], found.up_source,
                                          found.plane is not None,
                                          matcher)

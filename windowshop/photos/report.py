@@ -82,14 +82,20 @@ SWUNG = ("the phone moved too far for it while the others kept the room still: r
          "holding the phone where it was for the others")
 
 
-def reshoot(shown: list[str], unplaced: list[str]) -> dict[str, str]:
+def reshoot(shown: list[str], unplaced: list[str], apart: dict[str, list[str]] | None = None
+            ) -> dict[str, str]:
     """What to reshoot for each photo that could not be placed: `shown` are all photos' names in
     the order taken (file-name order), `unplaced` the ones without a pose. A photo is placed by
-    what it shares with others, so the advice names its placed neighbours in that order."""
-    missing = set(unplaced)
+    what it shares with others, so the advice names its placed neighbours in that order. `apart`
+    holds the unplaced photos that share nothing with any placed one, each with the photos it
+    does match: a photo of something else, or of a side no photo links to the rest."""
+    missing, apart = set(unplaced), apart or {}
     advice = {}
     for i, name in enumerate(shown):
         if name not in missing:
+            continue
+        if name in apart:
+            advice[name] = _apart_advice(apart[name])
             continue
         before = next((n for n in reversed(shown[:i]) if n not in missing), None)
         after = next((n for n in shown[i + 1:] if n not in missing), None)
@@ -99,6 +105,16 @@ def reshoot(shown: list[str], unplaced: list[str]) -> dict[str, str]:
                         "it shares too few details with the others: retake it")
         advice[name] += " (steps of 10-15 degrees around the object, the whole object in view)"
     return advice
+
+
+def _apart_advice(matches: list[str]) -> str:
+    if not matches:
+        return ("it shares no details with any other photo: leave it out if it shows something "
+                "else; if it shows the object, retake it with the whole object in view, a step of "
+                "10-15 degrees from another photo")
+    return (f"it matches only {' and '.join(matches)}, none of the placed photos: leave them out "
+            "if they show something else; if they show another side of the object, add photos "
+            "between that side and the others (steps of 10-15 degrees)")
 
 
 def plot_cameras(out: Path, cameras: list[Camera], aabb: np.ndarray, points: np.ndarray) -> Path:

@@ -51,6 +51,23 @@ def test_a_large_jpeg_shrunk_while_decoding_matches_the_whole_photo_shrunk(tmp_p
     assert np.abs(photo.pixels - expected).mean() < 2.0
 
 
+def test_a_digital_zoom_is_another_camera(tmp_path):
+    """A phone's digital zoom keeps the lens's EXIF focal length and writes its ratio beside it
+    (0: none): the photos it took get a camera key of their own, with the focal length zoomed."""
+    keys = {}
+    for zoom in (None, 0.0, 1.0, 2.0):
+        exif = Image.Exif()
+        exif[0x010F], exif[0x0110] = "Phone", "X"
+        details = exif.get_ifd(0x8769)
+        details[0x920A] = 4.25
+        if zoom is not None:
+            details[0xA404] = zoom
+        Image.fromarray(_pattern()).save(tmp_path / f"{zoom}.jpg", exif=exif)
+        keys[zoom] = ingest.read_photo(tmp_path / f"{zoom}.jpg", max_side=None).camera_key
+    assert keys[None] == keys[0.0] == keys[1.0]
+    assert keys[2.0][2] == pytest.approx(8.5) and keys[2.0][::3] == keys[None][::3]
+
+
 def test_resized_to_working_size_with_scale():
     photo = ingest.read_photo(KERMIT / "kermit000.jpg", max_side=320)
     assert photo.pixels.shape == (240, 320, 3)

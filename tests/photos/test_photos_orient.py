@@ -33,14 +33,15 @@ def test_the_photos_held_the_other_way_from_most_of_their_lens_are_turned():
     assert orient.turned_names([_photo("a", 8, 6), _photo("b", 8, 6)]) == frozenset()
 
 
-def test_one_camera_for_a_lens_held_both_ways_but_not_for_a_cropped_photo():
+def test_one_camera_for_a_lens_held_both_ways_and_another_for_a_cropped_photo():
     photos = [_photo("p1", 8, 6), _photo("p2", 8, 6), _photo("l1", 6, 8)]
     settings = _settings(Inputs("photos", []), photos, PrepareOptions())
-    assert settings.single_camera and settings.turned == {"l1.jpg"}
+    assert settings.cameras == () and settings.turned == {"l1.jpg"}
     cropped = _photo("c", 6, 8)
     cropped.camera_key = (*cropped.camera_key[:3], (7, 5))  # its original: another size
     settings = _settings(Inputs("photos", []), photos + [cropped], PrepareOptions())
-    assert not settings.single_camera and settings.turned == frozenset()
+    assert settings.turned == {"l1.jpg", "c.jpg"}  # as many each way: landscape turned
+    assert sorted(map(sorted, settings.cameras)) == [["c.jpg"], ["l1.jpg", "p1.jpg", "p2.jpg"]]
 
 
 def test_a_pixel_of_the_turned_photo_comes_back_to_where_it_was_taken():

@@ -133,3 +133,41 @@ def test_temple_masks_lie_on_the_temple(temple):
         inside = mask[max(v0, 0):v1, max(u0, 0):u1].sum()
         assert inside >= 0.98 * mask.sum()
         assert mask.sum() >= 0.25 * (v1 - v0) * (u1 - u0)
+
+
+def _exif(make: str, focal: float, zoom: float | None) -> Image.Exif:
+    exif = Image.Exif()
+    exif[0x010F], exif[0x0110] = make, "Model X"
+    details = exif.get_ifd(0x8769)
+    details[0x920A] = focal  # FocalLength
+    if zoom is not None:
+        details[0xA404] = zoom  # DigitalZoomRatio
+    return exif
+
+
+def test_close_ups_of_a_phones_digital_zoom_are_placed_with_their_own_focal_length(tmp_path):
+    """16 dtu_skull photos and three close-ups a phone's 2x digital zoom took (the middle of
+    other views, at the same pixel size and EXIF focal length, with its DigitalZoomRatio): the
+    close-ups get twice the focal length and stand as far from the skull as the others. With
+    one camera for all, they were placed at half the distance."""
+    photos, images = tmp_path / "photos", DATA / "dtu_skull" / "images"
+    photos.mkdir()
+    for i in range(2, 48, 3):
+        Image.open(images / f"{i:03d}.jpg").resize((400, 300), Image.Resampling.LANCZOS).save(
+            photos / f"{i:03d}.jpg", quality=92, exif=_exif("Phone", 4.25, None))
+    for i in (10, 25, 40):
+        Image.open(images / f"{i:03d}.jpg").crop((200, 135, 600, 435)).save(
+            photos / f"zoom{i:03d}.jpg", quality=92, exif=_exif("Phone", 4.25, 2.0))
+    prepare(photos, tmp_path / "scene", PrepareOptions(), show=False)
+    meta = json.loads((tmp_path / "scene" / "transforms.json").read_text())
+    focal = {Path(f["file_path"]).stem: f["fl_x"] for f in meta["frames"]}
+    distance = {name: np.linalg.norm(c2w[:3, 3])
+                for name, c2w in _recovered(tmp_path / "scene").items()}
+    zoomed = [name for name in focal if name.startswith("zoom")]
+    others = [name for name in focal if not name.startswith("zoom")]
+    assert len(zoomed) == 3 and len(others) >= 12
+    ratio = np.median([focal[n] for n in zoomed]) / np.median([focal[n] for n in others])
+    assert ratio == pytest.approx(2.0, rel=0.1)
+    far = np.median([distance[n] for n in others])
+    assert all(distance[n] == pytest.approx(far, rel=0.15) for n in zoomed), (
+        {n: round(float(d), 2) for n, d in distance.items()}, focal)

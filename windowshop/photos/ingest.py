@@ -125,9 +125,14 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
 
 
 def _camera_key(image: Image.Image, size: tuple[int, int]) -> tuple:
-    """(make, model, focal length, size): photos sharing it can share one set of intrinsics."""
+    """(make, model, focal length, size): photos sharing it can share one set of intrinsics. A
+    phone's digital zoom crops the lens's picture and keeps its focal length in the EXIF, with
+    the zoom beside it: the zoom multiplies the focal length."""
     exif = image.getexif()
-    focal = exif.get_ifd(0x8769).get(0x920A)  # Exif IFD: FocalLength
+    details = exif.get_ifd(0x8769)  # Exif IFD
+    focal, zoom = details.get(0x920A), details.get(0xA404)  # FocalLength, DigitalZoomRatio
+    if focal is not None and zoom:  # a ratio of 0 means no digital zoom
+        focal = float(focal) * float(zoom)
     return (exif.get(0x010F), exif.get(0x0110), float(focal) if focal is not None else None, size)
 
 

@@ -140,21 +140,25 @@ def _settings(inputs: Inputs, photos: list[Photo], options: PrepareOptions,
         matcher = "sequential"  # photos: by count and order (windowshop.photos.pairs)
     if matcher not in ("auto",) + MATCHERS:
         raise UserError(f"unknown matcher {matcher!r}; use {', '.join(MATCHERS)} or auto")
-    # one camera for the photos of one lens, those held the other way turned to match
+    # one camera for the photos of one lens, those held the other way turned to match (a camera
+    # per photo is a lottery on few photos: bench/RESULTS.md, stop 54)
     turned = orient.turned_names(photos)
-    single = len({orient.sfm_key(p, f"{p.name}.jpg" in turned) for p in photos}) == 1
+    lenses: dict[tuple, set[str]] = {}
+    for p in photos:
+        lenses.setdefault(orient.sfm_key(p, f"{p.name}.jpg" in turned), set()).add(f"{p.name}.jpg")
+    cameras = tuple(frozenset(names) for names in lenses.values()) if len(lenses) > 1 else ()
     intrinsics = None
     if options.intrinsics is not None:
         if len({(p.pixels.shape, round(p.scale, 6)) for p in photos}) != 1:
             raise UserError("--intrinsics applies to photos of one size, but these differ in size")
         intrinsics = tuple(float(v) * photos[0].scale for v in options.intrinsics)
-        single = True
+        cameras = ()
     headings = None
     if priors is not None and priors.usable([p.name for p in photos], priors.heading):
         headings = tuple(priors.heading.get(p.name) for p in photos)
-    return SfmSettings(matcher=matcher, intrinsics=intrinsics, single_camera=single,
+    return SfmSettings(matcher=matcher, intrinsics=intrinsics, cameras=cameras,
                        seed=options.seed, verbose=options.verbose, headings=headings,
-                       turned=turned if single else frozenset())
+                       turned=turned)
 
 
 def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:

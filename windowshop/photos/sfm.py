@@ -86,7 +86,9 @@ class SfmSettings:
     # frames, by name) or "retrieval"
     matcher: str = "auto"
     intrinsics: tuple[float, float, float, float] | None = None  # known fx, fy, cx, cy (working px)
-    single_camera: bool = True  # all photos share one camera (one EXIF camera, one shape as turned)
+    # image names that share one camera, a set for each lens (EXIF make, model, focal length
+    # and digital zoom) and shape as turned; empty: one camera for all
+    cameras: tuple[frozenset[str], ...] = ()
     # image names turned a quarter for structure from motion (windowshop.photos.orient)
     turned: frozenset[str] = frozenset()
     seed: int = 0
@@ -166,24 +168,37 @@ def _extraction(wide: bool, photos: int, octave: int = -1) -> pycolmap.FeatureEx
 
 def extract(database: Path, image_dir: Path, names: list[str], settings: SfmSettings,
             wide: bool, advance) -> dict[str, int]:
-    """SIFT features of `names` into `database`; returns the number of features per image."""
-    mode = pycolmap.CameraMode.SINGLE if settings.single_camera else pycolmap.CameraMode.PER_IMAGE
-    reader = _reader_options(settings)
+    """SIFT features of `names` into `database`, a camera for each of `settings.cameras`;
+    returns the number of features per image."""
     octave = -1 if wide else first_octave(database, image_dir, names, settings)
     extraction = _extraction(wide, len(names), octave)
-    for start in range(0, len(names), CHUNK):
-        pycolmap.extract_features(database, image_dir, image_names=names[start:start + CHUNK],
-                                  camera_mode=mode, reader_options=reader,
-                                  extraction_options=extraction, device=pycolmap.Device.cpu)
-        if settings.single_camera and reader.existing_camera_id < 0:
-            # later chunks join the first chunk's camera rather than making their own
-            with pycolmap.Database.open(database) as db:
-                reader.existing_camera_id = db.read_all_cameras()[0].camera_id
-        advance(len(names[start:start + CHUNK]))
+    for group in _by_camera(names, settings.cameras):
+        reader = _reader_options(settings)
+        for start in range(0, len(group), CHUNK):
+            chunk = group[start:start + CHUNK]
+            pycolmap.extract_features(database, image_dir, image_names=chunk,
+                                      camera_mode=pycolmap.CameraMode.SINGLE,
+                                      reader_options=reader, extraction_options=extraction,
+                                      device=pycolmap.Device.cpu)
+            if reader.existing_camera_id < 0:
+                # later chunks join the first chunk's camera rather than making their own
+                with pycolmap.Database.open(database) as db:
+                    reader.existing_camera_id = db.read_image_with_name(chunk[0]).camera_id
+            advance(len(chunk))
     with pycolmap.Database.open(database) as db:
         in_given_order(db, names)
         return {image.name: db.num_keypoints_for_image(image.image_id)
                 for image in db.read_all_images()}
+
+
+def _by_camera(names: list[str], cameras: tuple[frozenset[str], ...]) -> list[list[str]]:
+    """`names` in groups of one camera each, in the order given; names in none of `cameras`
+    (all of them when it is empty) share one more."""
+    index = {name: i for i, group in enumerate(cameras) for name in group}
+    groups: dict[int, list[str]] = {}
+    for name in names:
+        groups.setdefault(index.get(name, -1), []).append(name)
+    return list(groups.values())
 
 
 def in_given_order(db: pycolmap.Database, names: list[str]) -> None:

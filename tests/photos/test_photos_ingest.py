@@ -196,14 +196,19 @@ def test_fewer_than_five_usable_photos(tmp_path):
     assert "copy.jpg: exact duplicate of kermit000.jpg" in str(err.value)
 
 
-def test_gather_folder_ignores_other_files(tmp_path):
-    for name in ["b.jpg", "a.PNG", "notes.txt", ".DS_Store"]:
+def test_gather_folder_reads_its_subfolders_and_ignores_other_files(tmp_path):
+    """A folder is read as a zip of it is: its subfolders' photos too (a phone's DCIM/100APPLE,
+    101APPLE, ...), hidden ones left out."""
+    for name in ["b.jpg", "a.PNG", "notes.txt", ".DS_Store", "sub/c.jpg", "sub/list.txt",
+                 ".thumbnails/d.jpg"]:
+        (tmp_path / name).parent.mkdir(exist_ok=True)
         (tmp_path / name).write_bytes(b"x")
-    (tmp_path / "sub").mkdir()
+    (tmp_path / "empty").mkdir()
     inputs = ingest.gather_inputs(tmp_path, tmp_path / "scratch")
     assert inputs.kind == "photos"
-    assert [p.name for p in inputs.files] == ["a.PNG", "b.jpg"]
-    assert inputs.ignored == ["notes.txt"]
+    assert [p.relative_to(tmp_path).as_posix() for p in inputs.files] == ["a.PNG", "b.jpg",
+                                                                          "sub/c.jpg"]
+    assert inputs.ignored == ["notes.txt", "sub/list.txt"]
 
 
 def test_gather_zip_flattens_and_cannot_escape(tmp_path):

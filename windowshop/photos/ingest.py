@@ -113,14 +113,15 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
         raise UserError(f"{path}: not a photo, a video, or a folder or zip of photos "
                         f"(photos: {', '.join(sorted(IMAGE_SUFFIXES))}; "
                         f"videos: {', '.join(sorted(VIDEO_SUFFIXES))})")
-    entries = sorted(p for p in path.iterdir()
+    # subfolders too, as a zip of the folder is read (a phone's DCIM/100APPLE, 101APPLE, ...)
+    entries = sorted(p for p in path.rglob("*")
                      if p.is_file() and not is_hidden(p.relative_to(path)))
     photos = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
     videos = [p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES]
     if not photos and len(videos) == 1:
         return Inputs("video", videos)
     capture = find_capture(entries)
-    ignored = [p.name for p in entries if p not in photos and p != capture]
+    ignored = [p.relative_to(path).as_posix() for p in entries if p not in photos and p != capture]
     return Inputs("photos", photos, ignored, capture)
 
 

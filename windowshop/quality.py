@@ -51,11 +51,11 @@ def advice(report: dict) -> list[str]:
     apart = [name for name in report.get("apart", {}) if name not in swung]
     unplaced = [name for name in report.get("unplaced", []) if name not in swung + apart]
     if apart:
-        one = len(apart) == 1
-        tips.append(f"{_names(apart)} share{'s' if one else ''} no details with the placed "
-                    f"photos: leave {'it' if one else 'them'} out if {'it shows' if one else 'they show'} "
-                    f"something else; if {'it shows' if one else 'they show'} the object, add photos "
-                    f"between {'it' if one else 'them'} and the others")
+        share, it, shows = (("shares", "it", "it shows") if len(apart) == 1
+                            else ("share", "them", "they show"))
+        tips.append(f"{_names(apart)} {share} no details with the placed photos: leave {it} out "
+                    f"if {shows} something else; if {shows} the object, add photos between {it} "
+                    "and the others")
     if unplaced:
         tips.append(f"{_names(unplaced)} could not be placed: retake so each photo shares "
                     "most of its view with the photo before it"

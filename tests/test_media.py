@@ -85,17 +85,18 @@ def test_unzip_refuses_from_the_index_before_writing(tmp_path, entries, links, c
     assert not out.exists() or not any(out.rglob("*"))  # nothing was written
 
 
-def test_unzip_keeps_paths_skips_hidden_and_flattens_uniquely(tmp_path):
+def test_unzip_keeps_paths_and_skips_hidden_and_rejected(tmp_path):
     archive = _zip(tmp_path / "a.zip", {"a/x.jpg": b"1", "b/x.jpg": b"2", "__MACOSX/a/._x.jpg": b"",
                                         ".DS_Store": b"", "notes.txt": b"3"})
     with zipfile.ZipFile(archive) as zf:
         kept = [p.relative_to(tmp_path / "kept").as_posix()
                 for _, p in media.unzip(zf, tmp_path / "kept", "a.zip")]
-        flat = [p.name for _, p in media.unzip(zf, tmp_path / "flat", "a.zip", flatten=True,
-                                                keep=lambda p: p.suffix == ".jpg")]
+        photos = [p.relative_to(tmp_path / "photos").as_posix()
+                  for _, p in media.unzip(zf, tmp_path / "photos", "a.zip",
+                                          keep=lambda p: p.suffix == ".jpg")]
     assert kept == ["a/x.jpg", "b/x.jpg", "notes.txt"]
-    assert flat == ["x.jpg", "x-2.jpg"]
-    assert (tmp_path / "flat" / "x-2.jpg").read_bytes() == b"2"
+    assert photos == ["a/x.jpg", "b/x.jpg"]
+    assert (tmp_path / "photos" / "b" / "x.jpg").read_bytes() == b"2"
 
 
 def test_unzip_counts_file_bytes_as_written(tmp_path):

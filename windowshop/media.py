@@ -78,14 +78,13 @@ def copy_limited(src, dest: Path, limit: int | None, what: str) -> int:
 
 def unzip(archive: zipfile.ZipFile, folder: Path, name: str, limits: ZipLimits | None = None,
           keep: Callable[[PurePosixPath], bool] = lambda path: True,
-          flatten: bool = False, skip_unsafe: bool = False) -> Iterator[tuple[str, Path]]:
+          skip_unsafe: bool = False) -> Iterator[tuple[str, Path]]:
     """Unpack `archive` (called `name` in messages) into `folder`, yielding (entry name, file)
     for each file once written, so the caller can check it before the next.
 
     Hidden entries and those `keep` rejects are skipped. The whole index is checked first (see
     `check_index`); `skip_unsafe` skips escaping entries and links instead of refusing the zip.
-    `flatten` writes every file under its base name, made unique (a-2.jpg, ...); otherwise
-    entries keep their relative paths. Raises Refused.
+    Entries keep their relative paths. Raises Refused.
     """
     entries = []
     for entry in archive.infolist():
@@ -97,7 +96,7 @@ def unzip(archive: zipfile.ZipFile, folder: Path, name: str, limits: ZipLimits |
         if entry.is_dir():
             continue
         path = entry_path(entry.filename)
-        dest = _unique(folder / path.name) if flatten else folder / path
+        dest = folder / path
         dest.parent.mkdir(parents=True, exist_ok=True)
         what = f"{name!r}: entry {entry.filename!r}"
         try:
@@ -132,11 +131,3 @@ def _unsafe(entry: zipfile.ZipInfo, name: str) -> Refused | None:
                        "the files themselves")
     return None
 
-
-def _unique(target: Path) -> Path:
-    """`target`, or the first free `stem-2`, `stem-3`, ... beside it."""
-    n, stem = 2, target.stem
-    while target.exists():
-        target = target.with_name(f"{stem}-{n}{target.suffix}")
-        n += 1
-    return target

@@ -211,7 +211,25 @@ def test_gather_folder_reads_its_subfolders_and_ignores_other_files(tmp_path):
     assert inputs.ignored == ["notes.txt", "sub/list.txt"]
 
 
-def test_gather_zip_flattens_and_cannot_escape(tmp_path):
+def test_photos_of_one_name_in_two_folders_are_shown_by_their_folders(tmp_path):
+    """Two phones' photos in a folder each both start at IMG_0001.jpg: the report must say which
+    one it means."""
+    files = {"phone_a/IMG_0001.jpg": "kermit000", "phone_b/IMG_0001.jpg": "kermit001",
+             "phone_b/IMG_0002.jpg": "kermit001", "kermit002.jpg": "kermit002",
+             "kermit003.jpg": "kermit003", "kermit004.jpg": "kermit004"}
+    for name, source in files.items():
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_bytes((KERMIT / f"{source}.jpg").read_bytes())
+    dropped = ingest.Dropped()
+    inputs = ingest.gather_inputs(tmp_path, tmp_path / "scratch")
+    photos = ingest.read_photos(inputs.files, 160, dropped)
+    assert sorted(p.shown for p in photos) == ["kermit002.jpg", "kermit003.jpg", "kermit004.jpg",
+                                               "phone_a/IMG_0001.jpg", "phone_b/IMG_0001.jpg"]
+    assert dropped.reasons == {"IMG_0002.jpg": "exact duplicate of phone_b/IMG_0001.jpg"}
+    assert len({p.name for p in photos}) == len(photos)
+
+
+def test_gather_zip_keeps_its_folders_and_cannot_escape(tmp_path):
     archive = tmp_path / "photos.zip"
     with zipfile.ZipFile(archive, "w") as zf:
         zf.write(KERMIT / "kermit000.jpg", "a/kermit000.jpg")
@@ -221,7 +239,10 @@ def test_gather_zip_flattens_and_cannot_escape(tmp_path):
         zf.writestr("readme.txt", b"hello")
     scratch = tmp_path / "scratch"
     inputs = ingest.gather_inputs(archive, scratch)
-    assert sorted(p.name for p in inputs.files) == ["kermit000-2.jpg", "kermit000.jpg"]
+    assert sorted(p.relative_to(scratch).as_posix() for p in inputs.files) == [
+        "unzipped/a/kermit000.jpg", "unzipped/b/kermit000.jpg"]
+    assert sorted(ingest.shown_names(inputs.files).values()) == ["a/kermit000.jpg",
+                                                                  "b/kermit000.jpg"]
     assert all(scratch in p.parents for p in inputs.files)
     assert not list(tmp_path.rglob("evil.jpg"))  # a member climbing out with ".." is skipped
 

@@ -67,5 +67,6 @@ def sample_frames(path: str | Path, count: int, max_side: int | None,
     if not best:
         raise UserError(f"{path}: the video has no frames")
     return [Photo(name=f"{path.stem}_{index:05d}", source=path, pixels=pixels, scale=scale,
-                  camera_key=("video", pixels.shape), sharpness=score)
+                  camera_key=("video", pixels.shape), sharpness=score,
+                  shown=f"{path.stem}_{index:05d}")
             for score, index, pixels, scale in (best[s] for s in sorted(best))]

@@ -59,6 +59,10 @@ class Photo:
     camera_key: tuple = ()  # photos with equal keys come from one camera (EXIF make, model, focal)
     sharpness: float = 0.0
     cutout: np.ndarray | None = None  # (H, W) bool, the opaque pixels of a cut-out (see above)
+    shown: str = ""  # the name the user knows it by (shown_names; a video frame's own name)
+
+    def __post_init__(self):
+        self.shown = self.shown or self.source.name
 
 
 @dataclass
@@ -84,13 +88,14 @@ def _is_media(path: PurePosixPath) -> bool:
 
 
 def _unzip(archive: Path, scratch: Path) -> Path:
-    """Extract the photos and videos of `archive` into `scratch/unzipped` (flattened; names made
-    unique); the user's own file, so without limits, and with unsafe entries skipped."""
+    """Extract the photos and videos of `archive` into `scratch/unzipped`, in their folders, as a
+    folder is read (shown_names tells apart one name in two folders); the user's own file, so
+    without limits, and with unsafe entries skipped."""
     out = scratch / "unzipped"
     out.mkdir(parents=True, exist_ok=True)
     try:
         with zipfile.ZipFile(archive) as zf:
-            list(unzip(zf, out, str(archive), keep=_is_media, flatten=True, skip_unsafe=True))
+            list(unzip(zf, out, str(archive), keep=_is_media, skip_unsafe=True))
     except zipfile.BadZipFile as err:
         raise UserError(f"{archive}: not a readable zip file ({err}); "
                         f"zip the photos again") from err
@@ -209,6 +214,22 @@ def sharpness(pixels: np.ndarray) -> float:
     return float(lap.var())
 
 
+def shown_names(files: list[Path]) -> dict[Path, str]:
+    """The name the user knows each file by: its file name, or where files in different folders
+    share one (two phones' IMG_0001.jpg), as much of its path as tells them apart."""
+    by_name: dict[str, list[Path]] = {}
+    for path in files:
+        by_name.setdefault(path.name, []).append(path)
+    shown = {}
+    for same in by_name.values():
+        parts = 1
+        while len({Path(*f.parts[-parts:]) for f in same}) < len(same) and parts < max(
+                len(f.parts) for f in same):
+            parts += 1
+        shown.update({f: Path(*f.parts[-parts:]).as_posix() for f in same})
+    return shown
+
+
 def unique_names(photos: list[Photo]) -> None:
     """Make the photos' names unique in place (a.jpg and a.png -> a, a-2)."""
     seen: set[str] = set()
@@ -228,7 +249,7 @@ def drop_duplicates(photos: list[Photo], dropped: Dropped) -> list[Photo]:
     for photo in photos:
         digest = hashlib.sha1(photo.pixels.tobytes() + str(photo.pixels.shape).encode()).hexdigest()
         if digest in first:
-            dropped.reasons[photo.source.name] = f"exact duplicate of {first[digest].source.name}"
+            dropped.reasons[photo.shown] = f"exact duplicate of {first[digest].shown}"
             continue
         first[digest] = photo
         kept.append(photo)
@@ -260,7 +281,7 @@ def drop_blurred(photos: list[Photo], dropped: Dropped, ratio: float = BLUR_RATI
     blurred = {id(p) for p in suspects if blur[id(p)] > usual + BLUR_EXCESS}
     for photo in photos:
         if id(photo) in blurred:
-            dropped.reasons[photo.source.name] = (
+            dropped.reasons[photo.shown] = (
                 f"too blurred (sharpness {photo.sharpness / median:.2f} of the median, blur "
                 f"{blur[id(photo)]:.2f} against the photos' {usual:.2f})")
     return [p for p in photos if id(p) not in blurred]
@@ -286,6 +307,9 @@ def read_photos(files: list[Path], max_side: int | None, dropped: Dropped,
         raise UserError(f"{len(errors)} of {len(files)} files could not be read:\n  "
                         + "\n  ".join(errors))
     unique_names(photos)
+    shown = shown_names([p.source for p in photos])
+    for photo in photos:
+        photo.shown = shown[photo.source]
     photos = drop_blurred(drop_duplicates(photos, dropped), dropped)
     check_enough(photos, dropped)
     return photos

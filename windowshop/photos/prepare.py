@@ -28,7 +28,6 @@ import numpy as np
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
-from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
                                orient, segment, sensors, still)
 from windowshop.photos.exposure import evened, negligible, photo_exposures
@@ -120,7 +119,7 @@ def _cropped(photos: list[Photo]) -> list[str]:
     loses where its centre was, which the cameras' placing needs (dtu_skull's 12 photos cut out
     and cropped so: 5.4 deg median rotation error, against 0.7 at full size)."""
     cutouts = [p for p in photos if p.cutout is not None]
-    return ([_shown(p) for p in cutouts] if len({p.pixels.shape for p in cutouts}) > 1
+    return ([p.shown for p in cutouts] if len({p.pixels.shape for p in cutouts}) > 1
             else [])
 
 
@@ -185,11 +184,6 @@ def check_placed(sfm: SfmResult, count: int, shown: dict[str, str]) -> None:
                     f"Take more photos with overlap: walk around the object in small steps "
                     f"(10-15 degrees) so that each photo shares most of its view with the next"
                     + (f". Also, {texture}" if len(poor) > count // 4 else ""))
-
-
-def _shown(photo: Photo) -> str:
-    """The name the user knows a photo by: its file, or for a video frame the frame's name."""
-    return photo.name if photo.source.suffix.lower() in VIDEO_SUFFIXES else photo.source.name
 
 
 def _views(sfm: SfmResult, photos: list[output.PosedPhoto], pixels: dict[str, np.ndarray],
@@ -384,7 +378,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
             dark: list[str], sfm: SfmResult, found: Located, stages: Stages) -> dict:
     by_name = {p.name: p for p in photos}
     def shown(name: str) -> str:
-        return _shown(by_name[name.rsplit(".", 1)[0]])
+        return by_name[name.rsplit(".", 1)[0]].shown
 
     unplaced = [shown(n) for n in sfm.unplaced]
     ring = {shown(n): report.RING_NOTES[how] for n, how in sorted(sfm.ring_method.items())}
@@ -394,7 +388,7 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "dropped": dropped.reasons, "used": len(photos), "placed": len(sfm.placed),
         "dark": dark, "cropped": _cropped(photos),
         "unplaced": unplaced, "estimated_from_ring": ring, "apart": apart,
-        "reshoot": report.reshoot([_shown(p) for p in photos], unplaced + sorted(ring), apart),
+        "reshoot": report.reshoot([p.shown for p in photos], unplaced + sorted(ring), apart),
         "reprojection_error_px": float(sfm.reconstruction.compute_mean_reprojection_error()),
         "points": int(sfm.reconstruction.num_points3D()), "object_points": len(found.points),
         "features_median": int(np.median(list(sfm.keypoints.values()))),
@@ -469,7 +463,7 @@ def prepare(source: str | Path, out_dir: str | Path, options: PrepareOptions = P
         work = Path(tmp)
         inputs = gather_inputs(source, work)
         photos, dropped = _read(inputs, options, stages)
-        dark = [_shown(p) for p in photos if underexposed(p.pixels)]
+        dark = [p.shown for p in photos if underexposed(p.pixels)]
         with _light_blamed(dark, len(photos)), _hand_held_blamed(work):
             transforms, summary = _pose(source, out_dir, work, inputs, photos, dropped, dark,
                                         options, stages)
@@ -502,7 +496,7 @@ def _pose(source: Path, out_dir: Path, work: Path, inputs: Inputs, photos: list[
         image_dir = work / "images"
         sfm = steady.unplaced(reconstruct(image_dir, list(pixels), work, settings, stages))
     matcher = sfm.matcher  # the first model's: the hypotheses' remaps keep its matches
-    shown = {f"{p.name}.jpg": _shown(p) for p in photos}
+    shown = {f"{p.name}.jpg": p.shown for p in photos}
     check_placed(sfm, len(photos), shown)
     with stages.stage("finding and checking the object"):
         choice = _choose(sfm, pixels, work, settings, _gravity(priors, photos),

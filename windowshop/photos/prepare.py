@@ -28,8 +28,8 @@ import numpy as np
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
-from windowshop.photos import (hypotheses, matting_rembg, objectbox, output, plane, report,
-                               orient, segment, sensors, still)
+from windowshop.photos import (hypotheses, matting_rembg, objectbox, offplane, output, plane,
+                               report, orient, segment, sensors, still)
 from windowshop.photos.exposure import evened, negligible, photo_exposures
 from windowshop.photos.frames import sample_frames
 from windowshop.photos.ingest import (Dropped, Inputs, Photo, check_enough, gather_inputs,
@@ -312,8 +312,12 @@ def locate(sfm: SfmResult, pixels: dict[str, np.ndarray], options: PrepareOption
     if options.masks:
         search = _search_box(aabb, floor=floor is not None)
         views = _views(sfm, posed, pixels, _labels(points, ids, isolated, transform, search))
-        if not by_points:  # no points of its own: it is surely where every photo looks
-            views = _looked_at(views)
+        if not by_points:  # no points of its own: it is surely where every photo looks, and
+            views = _looked_at(views)  # on a patterned table, what stands off it is the object
+            if floor is not None:
+                table = points[np.abs(floor.height(points)) <= floor.tolerance]
+                off = offplane.stands_off(views, table @ transform[:3, :3].T + transform[:3, 3])
+                views = [replace(v, stands_out=o) for v, o in zip(views, off)]
         # steadied, the backdrop stands still even where the object's matches outnumber its own
         # (bench_isolation's held skull over beer_can's tiles, 16 photos: masks IoU 0.736 on
         # average and 0.322 at worst without the backdrop, 0.773 and 0.458 with it)

@@ -68,7 +68,7 @@ def _disks(shape: tuple[int, int], uv: np.ndarray, radius: int) -> np.ndarray:
     return out > 0
 
 
-def _polygon(shape: tuple[int, int], uv: np.ndarray) -> np.ndarray:
+def polygon(shape: tuple[int, int], uv: np.ndarray) -> np.ndarray:
     """(H, W) bool: the convex hull of the pixels `uv` (N, 2), N >= 3."""
     out = np.zeros(shape, dtype=np.uint8)
     cv2.fillConvexPoly(out, cv2.convexHull(np.round(uv).astype(np.int32)), 1)
@@ -82,7 +82,7 @@ def box_outline(aabb: np.ndarray, camera: Camera, grow: float = MARGIN) -> np.nd
     uv, depth = project(box_corners(aabb), camera)
     if np.any(depth <= 0):
         return np.ones(shape, dtype=bool)
-    outline = _polygon(shape, uv)
+    outline = polygon(shape, uv)
     radius = round(grow * np.hypot(*shape))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     return cv2.dilate(outline.astype(np.uint8), kernel) > 0

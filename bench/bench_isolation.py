@@ -1,7 +1,8 @@
 """Object isolation on real backgrounds: `windowshop prepare`'s masks against hand-made ones.
 
     python bench/bench_isolation.py [--views 16] [--max-side 640]
-                                    [--only skull|turntable|held|beer|fruit] [--keep DIR]
+                                    [--only skull|turntable|held|granite|beer|fruit]
+                                    [--keep DIR]
 
 dtu_skull (a skull on a cardboard table, hand-made masks): mean and worst IoU of each written
 mask (resized to the hand mask's size) with the hand mask. turntable: the same skull, its
@@ -9,6 +10,9 @@ hand-made mask laid over one still photo of a room, a tiled floor and a paper to
 (scene.products.on_turntable: a phone that stood still while the object turned), scored alike.
 held: the same, each backdrop shifted by up to 20 px either way in each photo (a phone held in
 the hand), the hand-made masks moved and cut as prepare steadied the photos.
+granite: a plain figure on a granite table, rendered with its true masks
+(scene.products.figure_on_granite, seeds 0 to GRANITE_SEEDS - 1, 640 x 480): every sparse point
+lies on the table, so the object is found where the photos look.
 beer_can (a can on a tiled floor, no hand masks; the frames of bench_prepare.py) and fruit (an
 apple and a banana on a white cloth): the masks' share of the image. Prints JSON; `--keep`
 leaves the scenes there.
@@ -130,6 +134,23 @@ def held(work: Path, views: int, options: PrepareOptions) -> dict:
     return turntable(work, views, options, HELD_PX)
 
 
+GRANITE_SEEDS = 8
+
+
+def granite(work: Path, views: int, options: PrepareOptions) -> dict:
+    """The rendered figure on granite, one capture per seed, against its true masks."""
+    rows = {}
+    for seed in range(GRANITE_SEEDS):
+        capture = products.figure_on_granite(work / f"granite{seed}", count=views, seed=seed)
+        report, masks = run(capture / "images", work / f"granite{seed}-scene", options)
+        scores = [iou(mask, np.asarray(Image.open(capture / "masks" / f"{photo.stem}.png")) > 127)
+                  for photo, mask in masks.items()] or [0.0]
+        rows[f"seed{seed}"] = {**summary(report), "mean_iou": round(float(np.mean(scores)), 3),
+                               "worst_iou": round(min(scores), 3)}
+    return {"mean_iou": round(float(np.mean([r["mean_iou"] for r in rows.values()])), 3),
+            "worst_iou": min(r["worst_iou"] for r in rows.values()), **rows}
+
+
 def area(name: str, files: list[Path], work: Path, options: PrepareOptions) -> dict:
     """Prepare `files` (no hand masks): how much of each photo the masks take."""
     report, masks = run(linked(files, work / name), work / f"{name}-scene", options)
@@ -153,7 +174,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=16)
     parser.add_argument("--max-side", type=int, default=640)
-    parser.add_argument("--only", choices=["skull", "turntable", "held", "beer", "fruit"],
+    parser.add_argument("--only", choices=["skull", "turntable", "held", "granite", "beer",
+                                           "fruit"],
                         default=None)
     parser.add_argument("--keep", default=None, help="write the scenes under this folder")
     args = parser.parse_args()
@@ -164,7 +186,7 @@ def main() -> None:
         work = Path(args.keep) if args.keep else Path(tmp)
         for key, name, bench in (("skull", "dtu_skull", skull),
                                  ("turntable", "turntable", turntable),
-                                 ("held", "held", held),
+                                 ("held", "held", held), ("granite", "granite", granite),
                                  ("beer", "beer_can", beer), ("fruit", "fruit", fruit)):
             if args.only in (None, key):
                 results[name] = bench(work, args.views, options)

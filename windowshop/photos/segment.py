@@ -5,6 +5,8 @@ sparse points and its box, then made consistent across views through their visua
     object keypoints ──> sure object; other keypoints (the surface, the room) ──> sure background
     a still backdrop (the phone did not move; windowshop.photos.still) ──> probable background,
         and what stands out from it ──> sure object
+    no points of its own, on a patterned table: what stands off the table's plane in the
+        neighbouring photos (windowshop.photos.offplane) ──> sure object
     GrabCut per photo ──> visual hull of the masks (forgiving a few bad ones) ──> GrabCut again
     within each photo's view of the hull (its background model now learns the colours right
     around the object) ──> cut to the hull of the results (segment.consistent): a pixel stays
@@ -54,7 +56,7 @@ class View:
     object_uv: np.ndarray  # (K, 2) the object's points seen in this photo
     background_uv: np.ndarray  # (B, 2) points off the object: the support surface, the room
     # (H, W) bool: a still backdrop, the same in every photo (windowshop.photos.still), and
-    # what stands out from it, or None
+    # what stands out from it (or off the support plane: windowshop.photos.offplane), or None
     backdrop: np.ndarray | None = None
     stands_out: np.ndarray | None = None
 

@@ -52,6 +52,35 @@ def test_fewer_than_five_usable_photos(tmp_path):
     assert "kermit000_again.jpg: exact duplicate of kermit000.jpg" in str(err)
 
 
+def _video(path: Path) -> Path:
+    """A real 12-frame MP4 of noise, 64 x 48."""
+    import imageio_ffmpeg
+
+    writer = imageio_ffmpeg.write_frames(str(path), (64, 48), fps=4)
+    writer.send(None)
+    for frame in np.random.default_rng(0).integers(0, 256, (12, 48, 64, 3), dtype=np.uint8):
+        writer.send(frame)
+    writer.close()
+    return path
+
+
+def test_a_video_among_too_few_photos_is_named(tmp_path):
+    """A folder is read as photos or as one video: the video beside four photos is left out, and
+    the refusal says so instead of counting four photos without a word on it."""
+    photos = _kermit(tmp_path / "photos", 4)
+    _video(photos / "walk.mp4")
+    err = _fails(photos, tmp_path / "out", r"only 4 usable photos")
+    assert "walk.mp4: a video among photos" in str(err) and "give the video alone" in str(err)
+
+
+def test_two_videos_are_not_taken_for_no_photos(tmp_path):
+    (tmp_path / "videos").mkdir()
+    for name in ("front.mp4", "back.mov"):
+        _video(tmp_path / "videos" / name)
+    _fails(tmp_path / "videos", tmp_path / "out",
+           r"2 videos found \(back\.mov, front\.mp4\): give one video at a time")
+
+
 def test_no_photos_at_all(tmp_path):
     (tmp_path / "photos").mkdir()
     (tmp_path / "photos" / "notes.txt").write_text("hello")

@@ -22,12 +22,13 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from functools import partial
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
 from windowshop.config import PrepareOptions
 from windowshop.errors import UserError
+from windowshop.media import VIDEO_SUFFIXES
 from windowshop.photos import (hypotheses, matting_rembg, objectbox, offplane, output, plane,
                                report, orient, segment, sensors, still)
 from windowshop.photos.exposure import evened, negligible, photo_exposures
@@ -51,6 +52,8 @@ MIN_PLACED_SHARE = 0.5  # fewer photos placed than this share (or than 3, or FIT
 SHARES = {"reading photos": 0.1, "sampling video frames": 0.1, "finding features": 0.3,
           "matching": 0.2, "placing cameras": 0.25, "finding and checking the object": 0.05,
           "writing the scene": 0.1}
+VIDEO_AMONG_PHOTOS = ("a video among photos: a folder is read as photos or as one video, not "
+                      "both; give the video alone to use it")
 STEADY = "steady"  # the scratch folder of steadied photos (prepare._steady)
 OUTPUTS = ("transforms.json", "report.json", "cameras.png", "images", "masks", "colmap")
 
@@ -88,9 +91,14 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
             photos = sample_frames(inputs.files[0], options.video_frames, options.max_side, advance)
         check_enough(photos, dropped, what="video frames")
         return photos, dropped
+    videos = [n for n in inputs.ignored if PurePosixPath(n).suffix.lower() in VIDEO_SUFFIXES]
     if not inputs.files:
-        raise UserError("no photos found (JPEG, PNG, WebP or HEIC files); give a folder or zip "
-                        "of photos, or a video")
+        raise UserError(f"{len(videos)} videos found ({', '.join(videos)}): give one video at a "
+                        f"time, or the photos" if videos else "no photos found (JPEG, PNG, WebP "
+                        "or HEIC files); give a folder or zip of photos, or a video")
+    # named as a dropped photo is: with four photos beside it, "only 4 usable photos" alone left
+    # the user wondering why the video did not count
+    dropped.reasons.update({name: VIDEO_AMONG_PHOTOS for name in videos})
     with stages.stage("reading photos", len(inputs.files)) as advance:
         return read_photos(inputs.files, options.max_side, dropped, advance), dropped
 

@@ -34,6 +34,15 @@ def clip(tmp_path_factory):
     return path
 
 
+def test_a_video_named_with_spaces_gives_frames_working_names_without(clip, tmp_path):
+    """COLMAP splits its list of pairs on whitespace; the user still sees the video's own name."""
+    named = tmp_path / "my walk.mp4"
+    named.write_bytes(clip.read_bytes())
+    photos = sample_frames(named, SPANS, max_side=None)
+    assert [p.name for p in photos] == [f"my_walk_{8 * k + 5:05d}" for k in range(SPANS)]
+    assert [p.shown for p in photos] == [f"my walk_{8 * k + 5:05d}" for k in range(SPANS)]
+
+
 def test_one_sharp_frame_per_span(clip):
     steps = []
     photos = sample_frames(clip, SPANS, max_side=None, advance=steps.append)

@@ -171,3 +171,19 @@ def test_close_ups_of_a_phones_digital_zoom_are_placed_with_their_own_focal_leng
     far = np.median([distance[n] for n in others])
     assert all(distance[n] == pytest.approx(far, rel=0.15) for n in zoomed), (
         {n: round(float(d), 2) for n, d in distance.items()}, focal)
+
+
+def test_photos_named_with_spaces_are_placed(tmp_path):
+    """COLMAP reads the list of pairs to match split on whitespace: kermit's 11 photos named as
+    a computer names copies ("Photo 1 (copy).jpg") were all left unplaced, with advice to walk
+    in smaller steps. Working names replace the whitespace; the report keeps the user's."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k, path in enumerate(sorted((DATA / "kermit").glob("*.jpg"))):
+        (photos / f"Photo {k + 1} (copy).jpg").write_bytes(path.read_bytes())
+    result = prepare(photos, tmp_path / "scene", PrepareOptions(max_side=320), show=False)
+    assert result.report["placed"] >= 10  # as with their own names at 320 px (before: 0)
+    shown = {f"Photo {k + 1} (copy).jpg" for k in range(11)}
+    assert {Path(v["photo"]).name for v in result.report["views"]} <= shown
+    assert set(result.report["unplaced"]) <= shown
+    assert not any(" " in v["name"] for v in result.report["views"])

@@ -13,7 +13,7 @@ import imageio_ffmpeg
 import numpy as np
 
 from windowshop.errors import UserError
-from windowshop.photos.ingest import Photo, sharpness
+from windowshop.photos.ingest import Photo, sharpness, working_name
 
 
 def _open(path: Path, max_side: int | None):
@@ -66,7 +66,7 @@ def sample_frames(path: str | Path, count: int, max_side: int | None,
     advance(count - reported)
     if not best:
         raise UserError(f"{path}: the video has no frames")
-    return [Photo(name=f"{path.stem}_{index:05d}", source=path, pixels=pixels, scale=scale,
-                  camera_key=("video", pixels.shape), sharpness=score,
+    return [Photo(name=f"{working_name(path.stem)}_{index:05d}", source=path, pixels=pixels,
+                  scale=scale, camera_key=("video", pixels.shape), sharpness=score,
                   shown=f"{path.stem}_{index:05d}")
             for score, index, pixels, scale in (best[s] for s in sorted(best))]

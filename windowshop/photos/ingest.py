@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import zipfile
 from dataclasses import dataclass, field
 from functools import partial
@@ -52,7 +53,7 @@ BACKDROP = (128, 128, 128)
 class Photo:
     """One usable photo (or video frame) at working resolution."""
 
-    name: str  # unique file stem, as in the source (a video frame: <video stem>_<frame index>)
+    name: str  # unique working_name of the file stem (a video frame: <its stem>_<frame index>)
     source: Path  # the user's file it came from
     pixels: np.ndarray  # (H, W, 3) uint8, upright
     scale: float  # working pixels per pixel of the upright original
@@ -178,7 +179,7 @@ def read_photo(path: Path, max_side: int | None) -> Photo:
     cutout = None if alpha is None else np.asarray(alpha) >= 128
     if cutout is not None and (1.0 - cutout.mean() < CUTOUT_SHARE or not cutout.any()):
         cutout = None
-    return Photo(name=path.stem, source=path, pixels=pixels, scale=size[0] / full[0],
+    return Photo(name=working_name(path.stem), source=path, pixels=pixels, scale=size[0] / full[0],
                  camera_key=key, sharpness=sharpness(pixels), cutout=cutout)
 
 
@@ -212,6 +213,13 @@ def sharpness(pixels: np.ndarray) -> float:
     lap = (grey[:-2, 1:-1] + grey[2:, 1:-1] + grey[1:-1, :-2] + grey[1:-1, 2:]
            - 4.0 * grey[1:-1, 1:-1])
     return float(lap.var())
+
+
+def working_name(stem: str) -> str:
+    """A file stem as the photo's working name: its whitespace made "_", since COLMAP reads
+    the list of pairs to match split on it ("Photo 12.jpg", as macOS and Windows name copies:
+    kermit's 11 so named, 0 of 11 placed)."""
+    return re.sub(r"\s+", "_", stem)
 
 
 def shown_names(files: list[Path]) -> dict[Path, str]:

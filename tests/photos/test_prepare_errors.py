@@ -66,11 +66,14 @@ def _video(path: Path) -> Path:
 
 def test_a_video_among_too_few_photos_is_named(tmp_path):
     """A folder is read as photos or as one video: the video beside four photos is left out, and
-    the refusal says so instead of counting four photos without a word on it."""
+    the refusal says so instead of counting four photos without a word on it. A Live Photo's
+    own clip, exported beside its photo under its name, is no video the user meant."""
     photos = _kermit(tmp_path / "photos", 4)
     _video(photos / "walk.mp4")
+    _video(photos / "kermit000.mov")
     err = _fails(photos, tmp_path / "out", r"only 4 usable photos")
     assert "walk.mp4: a video among photos" in str(err) and "give the video alone" in str(err)
+    assert "kermit000.mov" not in str(err)
 
 
 def test_two_videos_are_not_taken_for_no_photos(tmp_path):

@@ -74,6 +74,7 @@ class Inputs:
     files: list[Path]
     ignored: list[str] = field(default_factory=list)
     capture: Path | None = None  # the page's capture.json beside the photos (photos.sensors)
+    root: Path | None = None  # the folder read, which `ignored` is relative to
 
 
 @dataclass
@@ -128,7 +129,7 @@ def gather_inputs(path: str | Path, scratch: Path) -> Inputs:
         return Inputs("video", videos)
     capture = find_capture(entries)
     ignored = [p.relative_to(path).as_posix() for p in entries if p not in photos and p != capture]
-    return Inputs("photos", photos, ignored, capture)
+    return Inputs("photos", photos, ignored, capture, path)
 
 
 def _camera_key(image: Image.Image, size: tuple[int, int]) -> tuple:

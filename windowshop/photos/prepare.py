@@ -97,8 +97,11 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
                         f"time, or the photos" if videos else "no photos found (JPEG, PNG, WebP "
                         "or HEIC files); give a folder or zip of photos, or a video")
     # named as a dropped photo is: with four photos beside it, "only 4 usable photos" alone left
-    # the user wondering why the video did not count
-    dropped.reasons.update({name: VIDEO_AMONG_PHOTOS for name in videos})
+    # the user wondering why the video did not count; but not a Live Photo's own clip, which
+    # a phone exports beside its photo under the same name (IMG_0001.HEIC and IMG_0001.MOV)
+    stems = {f.with_suffix("") for f in inputs.files}
+    dropped.reasons.update({name: VIDEO_AMONG_PHOTOS for name in videos
+                            if (inputs.root / name).with_suffix("") not in stems})
     with stages.stage("reading photos", len(inputs.files)) as advance:
         return read_photos(inputs.files, options.max_side, dropped, advance), dropped
 

@@ -144,6 +144,12 @@ def test_report_doubts_the_photos_the_chosen_hypothesis_and_the_held_out_check_b
     report = quality_report(scene, metrics, {"covered_span_degrees": 324.0}, prepared)
     assert report["trust"]["doubtful"] == {"v3.jpg": "silhouettes", "v9.jpg": "held-out"}
     assert report["trust"]["level"] == "part" and report["trust"]["checked"]
+    # by the user's own file names where prepare worked under others ("v 3.png" as v_3, v3)
+    prepared["views"] = [{"name": f"v{i}", "photo": f"in/v {i}.png", "shown": f"v {i}.png"}
+                         for i in range(10)]
+    report = quality_report(scene, metrics, {"covered_span_degrees": 324.0}, prepared)
+    assert report["trust"]["doubtful"] == {"v 3.png": "silhouettes", "v 9.png": "held-out"}
+    assert "doubted: v 3.png (silhouettes), v 9.png (held-out)" in report["trust"]["summary"]
 
 
 def test_report_tells_which_unplaced_photos_steadying_left_out(tmp_path):

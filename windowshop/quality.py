@@ -143,8 +143,11 @@ def quality_report(scene: Scene, metrics: dict, render: dict, prepared: dict | N
         "turntable": render,
         "priors": (prepared or {}).get("priors"),  # what the phone's sensors gave, up's source
     }
-    names = [Path(v.name).name for v in scene.views]
-    report["trust"] = trust(names, azimuths, elevations, _doubtful(prepared, metrics), report["verified"])
+    # the photos by the names their user knows them by, not prepare's working names
+    shown = {v["name"]: v["shown"] for v in (prepared or {}).get("views", []) if "shown" in v}
+    names = [shown.get(Path(v.name).stem, Path(v.name).name) for v in scene.views]
+    doubtful = {shown.get(Path(n).stem, n): c for n, c in _doubtful(prepared, metrics).items()}
+    report["trust"] = trust(names, azimuths, elevations, doubtful, report["verified"])
     if render.get("swing"):
         report["note"] = (f"the photos cover {render['covered_span_degrees']:.0f}° of the circle "
                           f"(under {FULL_TURN_SPAN:.0f}°): the turntable swings across that arc and "

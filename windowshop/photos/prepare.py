@@ -413,7 +413,8 @@ def _report(source: Path, inputs: Inputs, photos: list[Photo], dropped: Dropped,
         "plane": {"found": found.plane is not None, "inlier_share": None if found.plane is None
                   else round(found.plane.inlier_share, 3)},
         "background": found.background, "aabb": found.aabb.tolist(),
-        "views": [{"name": p.name, "photo": str(by_name[p.name].source)} for p in found.photos],
+        "views": [{"name": p.name, "photo": str(by_name[p.name].source),
+                   "shown": by_name[p.name].shown} for p in found.photos],
         "seconds": {k: round(v, 3) for k, v in stages.seconds.items()},
     }
 

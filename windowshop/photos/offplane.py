@@ -43,23 +43,21 @@ def _seen(table: np.ndarray, view: View) -> tuple[np.ndarray, np.ndarray]:
     return uv, inside
 
 
-def _difference(view: View, other: View, table: np.ndarray) -> np.ndarray | None:
-    """(H, W) absolute grey difference between `view` and `other` warped onto it through the
-    plane of the points `table` (P, 3), NaN where the warp has nothing; None when too few table
-    points are seen by both."""
-    uv, seen = _seen(table, view)
-    uv_other, seen_other = _seen(table, other)
-    both = seen & seen_other
+def _difference(grey: np.ndarray, seen: tuple[np.ndarray, np.ndarray], other_grey: np.ndarray,
+                other_seen: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+    """(H, W) absolute difference between a photo's `grey` (_grey) and another's warped onto it
+    through the plane of the table points each sees (`seen`, `other_seen`: _seen), NaN where the
+    warp has nothing; None when too few table points are seen by both."""
+    (uv, inside), (uv_other, inside_other) = seen, other_seen
+    both = inside & inside_other
     if both.sum() < MIN_TABLE_POINTS:
         return None
     homography, _ = cv2.findHomography(uv_other[both].astype(np.float32),
                                        uv[both].astype(np.float32), 0)
     if homography is None:
         return None
-    size = (view.camera.width, view.camera.height)
-    warped = cv2.warpPerspective(_grey(other.pixels), homography, size, flags=cv2.INTER_LINEAR,
+    warped = cv2.warpPerspective(other_grey, homography, grey.shape[::-1], flags=cv2.INTER_LINEAR,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-    grey = _grey(view.pixels)
     # a phone sets each photo's exposure anew: the table, most of what both show, sets the gain
     # (every other photo of the granite figure 1.3 times brighter: 13% of the table stood off)
     shared = np.isfinite(warped) & polygon(grey.shape, uv[both])
@@ -72,19 +70,21 @@ def stands_off(views: list[View], table: np.ndarray) -> list[np.ndarray | None]:
     in the views' frame (the support plane's inliers), by parallax against the nearest views
     (module docstring); None for a view with no neighbour to compare with."""
     centres = np.stack([v.camera.center for v in views])
+    greys = [_grey(v.pixels) for v in views]
+    seen = [_seen(table, v) for v in views]
     found: list[np.ndarray | None] = []
-    for k, view in enumerate(views):
+    for k in range(len(views)):
         distance = np.linalg.norm(centres - centres[k], axis=1)
         distance[k] = np.inf
         differences = [d for j in np.argsort(distance)[:NEIGHBOURS]
-                       if (d := _difference(view, views[j], table)) is not None]
-        uv, seen = _seen(table, view)
-        if not differences or seen.sum() < 3:
+                       if (d := _difference(greys[k], seen[k], greys[j], seen[j])) is not None]
+        uv, inside = seen[k]
+        if not differences or inside.sum() < 3:
             found.append(None)
             continue
         least = np.min(np.stack(differences), axis=0)  # NaN (no warp) anywhere: not standing off
         off = np.nan_to_num(least, nan=0.0) > OFF_PLANE
-        off &= polygon(off.shape, uv[seen])  # where the table's points reach
+        off &= polygon(off.shape, uv[inside])  # where the table's points reach
         off = cv2.morphologyEx(off.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
         found.append(off > 0)
     return found

@@ -92,10 +92,12 @@ def _read(inputs: Inputs, options: PrepareOptions, stages: Stages) -> tuple[list
         check_enough(photos, dropped, what="video frames")
         return photos, dropped
     videos = [n for n in inputs.ignored if PurePosixPath(n).suffix.lower() in VIDEO_SUFFIXES]
-    if not inputs.files:
+    if not inputs.files and videos:
         raise UserError(f"{len(videos)} videos found ({', '.join(videos)}): give one video at a "
-                        f"time, or the photos" if videos else "no photos found (JPEG, PNG, WebP "
-                        "or HEIC files); give a folder or zip of photos, or a video")
+                        f"time, or the photos")
+    if not inputs.files:
+        raise UserError("no photos found (JPEG, PNG, WebP or HEIC files); give a folder or zip "
+                        "of photos, or a video")
     # named as a dropped photo is: with four photos beside it, "only 4 usable photos" alone left
     # the user wondering why the video did not count; but not a Live Photo's own clip, which
     # a phone exports beside its photo under the same name (IMG_0001.HEIC and IMG_0001.MOV)
